@@ -1,9 +1,10 @@
 """jaxsqueeze: differentiable two-finger squeeze grasps of soft planar objects."""
-from . import fem, shapes
+from . import fem
+from .bordered import Deformation, deform
 from .material import Material
-from .mesh import Mesh, read_mesh, write_mesh
+from .mesh import Mesh
 from .operator import Compliance
 from .status import Status
 
-__all__ = ["Compliance", "Material", "Mesh", "Status", "fem", "read_mesh", "shapes", "write_mesh"]
+__all__ = ["Compliance", "Deformation", "Material", "Mesh", "Status", "deform", "fem"]
 __version__ = "0.1.0"

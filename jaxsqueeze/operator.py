@@ -21,16 +21,32 @@ class FieldMap:
     """Displacement of every node of the object under forces at the contact-capable nodes.
 
     ``solve(f_hat)`` maps scaled forces ``(2m,)`` (interleaved x, y) to the scaled compliance
-    part of the displacement of all ``n`` nodes ``(2n,)``; ``rigid`` ``(2n, 3)`` holds the
-    rigid-mode columns for all nodes, in the same scaled units and order as ``Compliance.N``.
+    part of the displacement of all ``n`` nodes ``(2n,)``; ``points`` ``(n, 2)`` are the scaled
+    positions of all nodes, from which the rigid modes follow (see :func:`rigid_modes`).
     It runs outside JAX (numpy/scipy) and is reached from traced code through a callback.
     Hashes by identity, so it can sit in a pytree's static part.
     """
 
-    def __init__(self, solve: Callable[[np.ndarray], np.ndarray], rigid: np.ndarray):
+    def __init__(self, solve: Callable[[np.ndarray], np.ndarray], points: np.ndarray):
         self.solve = solve
-        self.rigid = np.asarray(rigid, dtype=np.float64)
-        self.n = self.rigid.shape[0] // 2
+        self.points = np.asarray(points, dtype=np.float64)
+        self.n = self.points.shape[0]
+
+
+def rigid_modes(points):
+    """Rigid-mode rows (2k, 3) at positions ``points`` (k, 2), DOFs interleaved.
+
+    Columns: unit x translation, unit y translation, and small rotation about the origin
+    (the node centroid), so ``g`` reads (t_x, t_y, angle) in the units of ``points``.
+    Unnormalized on purpose: entries stay O(1) in scaled units however many nodes there are,
+    which keeps the bordered matrix of eq. (4) well conditioned (DESIGN 2.3).
+    """
+    points = jnp.asarray(points)
+    k = points.shape[0]
+    one, zero = jnp.ones(k, points.dtype), jnp.zeros(k, points.dtype)
+    rows_x = jnp.stack([one, zero, -points[:, 1]], axis=1)
+    rows_y = jnp.stack([zero, one, points[:, 0]], axis=1)
+    return jnp.stack([rows_x, rows_y], axis=1).reshape(2 * k, 3)
 
 
 @jax.tree_util.register_dataclass
@@ -43,8 +59,8 @@ class Compliance:
         normals: (m, 2) outward unit normals at those nodes.
         G: (2m, 2m) scaled compliance, DOFs interleaved x0, y0, x1, y1, ... Exact on
             self-equilibrated forces: u_hat = G f_hat + N g for some rigid g.
-        N: (2m, 3) rigid-mode rows at those nodes: x translation, y translation,
-            rotation about the node centroid (scaled, normalized over all nodes).
+        N: (2m, 3) rigid-mode rows at those nodes, ``rigid_modes(points)``: x translation,
+            y translation, rotation about the node centroid (scaled, unnormalized).
         length: () object length L [m].
         stiffness: () E * thickness [N/m]; forces scale as ``stiffness * length`` [N].
         nodes: (m,) int, index of each contact-capable node among the object's nodes.
@@ -112,5 +128,5 @@ def _field_linear_jvp(fmap, primals, tangents):
 
 
 def _field(fmap: FieldMap, f_hat, g):
-    u = _field_linear(fmap, f_hat) + jnp.asarray(fmap.rigid, f_hat.dtype) @ g
+    u = _field_linear(fmap, f_hat) + rigid_modes(jnp.asarray(fmap.points, f_hat.dtype)) @ g
     return u.reshape(-1, 2)
