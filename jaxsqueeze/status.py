@@ -14,6 +14,7 @@ class Status(enum.IntEnum):
     OVERFLOW = 4         #: more contact nodes than slots (raise ``capacity``)
     NONFINITE = 5        #: a NaN or inf appeared in the state
     EVENT_OVERFLOW = 6   #: the event log is full (raise ``max_events``)
+    INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone
 
     @property
     def advice(self) -> str:
@@ -28,4 +29,6 @@ _ADVICE = {
     Status.OVERFLOW: "More contact nodes than slots. Raise Settings.capacity.",
     Status.NONFINITE: "A non-finite value appeared. Check the scene's scale and material values.",
     Status.EVENT_OVERFLOW: "The event log is full. Raise Settings.max_events.",
+    Status.INFEASIBLE_GRIP: ("The segment between the two grip nodes leaves a friction cone, so the squeeze "
+                             "cannot start (Section I-A). Pick nodes more nearly opposite or raise the friction."),
 }

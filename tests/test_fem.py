@@ -1,0 +1,516 @@
+"""Tests of the plane-stress FEM (jaxsqueeze.fem) and the bordered solve (jaxsqueeze.bordered).
+
+Checks against independent oracles written here: a loop-based numpy assembler, the energy
+integral (1) of the paper, the patch test, uniaxial tension, a direct elimination solve, and
+agreement of the three compliance builds (DESIGN 2.2). Runs in float64 (conftest).
+"""
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsqueeze as jsq
+from jaxsqueeze import bordered, fem
+from jaxsqueeze.material import Material
+
+try:  # meshes come from jaxsqueeze.shapes when it exists
+    import jaxsqueeze.shapes as shapes
+except ImportError:  # pragma: no cover - until shapes.py lands
+    shapes = None
+
+MAT = Material(E=2.5e6, nu=0.35, thickness=0.01)
+METHODS = ("sparse", "dense", "spectral")
+
+
+# ----------------------------------------------------------------------------- meshes
+def _circle(r, max_edge, cw=False):
+    k = max(8, int(np.ceil(2 * np.pi * r / max_edge)))
+    t = 2 * np.pi * np.arange(k) / k
+    p = r * np.stack([np.cos(t), np.sin(t)], axis=1)
+    return p[::-1] if cw else p
+
+
+def _local_polygon(vertices, holes=(), max_edge=0.01):
+    """Quality triangle mesh of a polygon with polygonal holes (fallback until shapes lands)."""
+    import triangle
+
+    loops = [np.asarray(vertices, float)] + [np.asarray(h, float) for h in holes]
+    verts, segs, start = [], [], 0
+    for lp in loops:
+        k = len(lp)
+        verts.append(lp)
+        segs.append(start + np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
+        start += k
+    data = dict(vertices=np.concatenate(verts), segments=np.concatenate(segs))
+    if holes:
+        data["holes"] = np.array([np.mean(h, axis=0) for h in loops[1:]])
+    area = np.sqrt(3) / 4 * max_edge**2
+    out = triangle.triangulate(data, f"pq30a{area:.12g}")
+    return jsq.Mesh.from_arrays(out["vertices"], out["triangles"])
+
+
+def _refine(loop, max_edge):
+    """Split polygon edges so no boundary edge exceeds max_edge (keeps boundary nodes exact)."""
+    loop = np.asarray(loop, float)
+    out = []
+    for a, b in zip(loop, np.roll(loop, -1, axis=0)):
+        k = max(1, int(np.ceil(np.linalg.norm(b - a) / max_edge)))
+        out.extend(a + (b - a) * i / k for i in range(k))
+    return np.array(out)
+
+
+L_SHAPE = [(0, 0), (0.08, 0), (0.08, 0.03), (0.03, 0.03), (0.03, 0.07), (0, 0.07)]
+
+
+@functools.lru_cache(maxsize=None)
+def mesh_of(name: str, max_edge: float = 0.01) -> jsq.Mesh:
+    if name == "rectangle":      # 0.1 m x 0.06 m
+        if shapes is not None:
+            return shapes.rectangle(0.1, 0.06, max_edge)
+        w, h = 0.05, 0.03
+        return _local_polygon(_refine([(-w, -h), (w, -h), (w, h), (-w, h)], max_edge), max_edge=max_edge)
+    if name == "annulus":        # r 0.05 / 0.02 m, a hole
+        if shapes is not None:
+            return shapes.annulus(0.05, 0.02, max_edge)
+        return _local_polygon(_circle(0.05, max_edge), [_circle(0.02, max_edge, cw=True)], max_edge)
+    if name == "lshape":         # non-convex polygon
+        if shapes is not None:
+            return shapes.polygon(L_SHAPE, max_edge=max_edge)
+        return _local_polygon(_refine(L_SHAPE, max_edge), max_edge=max_edge)
+    raise KeyError(name)
+
+
+SHAPES = ("rectangle", "annulus", "lshape")
+
+
+@functools.lru_cache(maxsize=None)
+def op_of(name: str, method: str, max_edge: float = 0.01):
+    return fem.compliance(mesh_of(name, max_edge), MAT, method)
+
+
+def dense_K(mesh, mat=MAT) -> np.ndarray:
+    return np.asarray(fem.stiffness(mesh, mat).todense())
+
+
+def rel_err(a, b) -> float:
+    a, b = np.asarray(a), np.asarray(b)
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def interior(mesh) -> np.ndarray:
+    mask = np.ones(mesh.n, bool)
+    mask[mesh.boundary] = False
+    return np.flatnonzero(mask)
+
+
+# ----------------------------------------------------------------------------- independent oracle
+def _shape_gradients(xy):
+    """Gradients (2, 3) of the linear shape functions and the area, from inverting [1 x y]."""
+    C = np.column_stack([np.ones(3), xy])          # row i: [1, x_i, y_i]
+    coef = np.linalg.inv(C)                         # N_i(x, y) = coef[:, i] . [1, x, y]
+    return coef[1:, :], 0.5 * abs(np.linalg.det(C))
+
+
+def reference_stiffness(points, triangles, E, nu, h) -> np.ndarray:
+    """Plane-stress CST stiffness by a plain loop over triangles (textbook form)."""
+    n = len(points)
+    D = E / (1 - nu**2) * np.array([[1, nu, 0], [nu, 1, 0], [0, 0, (1 - nu) / 2]])
+    K = np.zeros((2 * n, 2 * n))
+    for tri in np.asarray(triangles):
+        dN, area = _shape_gradients(np.asarray(points)[tri])
+        B = np.zeros((3, 6))
+        B[0, 0::2] = dN[0]           # eps_x = du/dx
+        B[1, 1::2] = dN[1]           # eps_y = dv/dy
+        B[2, 0::2] = dN[1]           # gamma = du/dy + dv/dx
+        B[2, 1::2] = dN[0]
+        ke = h * area * B.T @ D @ B
+        dofs = np.ravel([[2 * i, 2 * i + 1] for i in tri])
+        K[np.ix_(dofs, dofs)] += ke
+    return K
+
+
+def element_gradients(points, triangles, u) -> np.ndarray:
+    """Displacement gradient H (t, 2, 2) of each element: u(x) = a + H x fitted to its vertices."""
+    out = []
+    for tri in np.asarray(triangles):
+        C = np.column_stack([np.ones(3), np.asarray(points)[tri]])
+        out.append(np.linalg.solve(C, np.asarray(u)[tri])[1:].T)   # (2, 2): H[i, j] = du_i/dx_j
+    return np.array(out)
+
+
+def energy_integral(points, triangles, u, E, nu, h) -> float:
+    """Strain energy (1) of the paper, integrated element by element (strains are constant)."""
+    H = element_gradients(points, triangles, u)
+    ex, ey, gxy = H[:, 0, 0], H[:, 1, 1], H[:, 0, 1] + H[:, 1, 0]
+    p = np.asarray(points)[np.asarray(triangles)]
+    area = 0.5 * np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                        - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    dens = (ex**2 + 2 * nu * ex * ey + ey**2) / (1 - nu) + gxy**2 / 2
+    return float(h * E / (2 * (1 + nu)) * np.sum(area * dens))
+
+
+def traction_forces(mesh, sigma, h) -> np.ndarray:
+    """Nodal forces (n, 2) of the traction sigma . n of a uniform stress on the boundary.
+
+    Boundary edges are the triangle edges used once; a ccw triangle has the material on the
+    left of each of its edges, so the outward normal times length of edge a->b is
+    (y_b - y_a, -(x_b - x_a)). Linear shape functions give each end node half.
+    """
+    tri = np.asarray(mesh.triangles)
+    e = tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    key = np.sort(e, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    e = e[cnt[inv.ravel()] == 1]
+    d = mesh.points[e[:, 1]] - mesh.points[e[:, 0]]
+    nl = np.stack([d[:, 1], -d[:, 0]], axis=1)
+    t = 0.5 * h * nl @ np.asarray(sigma).T
+    f = np.zeros((mesh.n, 2))
+    np.add.at(f, e[:, 0], t)
+    np.add.at(f, e[:, 1], t)
+    return f
+
+
+def cross(p, f) -> np.ndarray:
+    return p[..., 0] * f[..., 1] - p[..., 1] * f[..., 0]
+
+
+# ----------------------------------------------------------------------------- stiffness
+@pytest.mark.parametrize("name", SHAPES)
+def test_stiffness_symmetric_psd_rank_and_null_space(name):
+    mesh = mesh_of(name)
+    K = dense_K(mesh)
+    scale = np.abs(K).max()
+    assert K.shape == (2 * mesh.n, 2 * mesh.n)
+    assert np.abs(K - K.T).max() <= 1e-14 * scale
+    lam = np.linalg.eigvalsh(K)
+    assert lam.min() >= -1e-12 * lam.max()                     # positive semi-definite
+    assert int(np.sum(lam > 1e-10 * lam.max())) == 2 * mesh.n - 3
+    assert np.linalg.matrix_rank(K) == 2 * mesh.n - 3
+    W = np.asarray(fem.null_space(mesh.points))
+    assert W.shape == (2 * mesh.n, 3)
+    np.testing.assert_allclose(W.T @ W, np.eye(3), atol=1e-12)   # normalized, orthogonal (centred)
+    assert np.abs(K @ W).max() <= 1e-12 * np.linalg.norm(K, 2)
+    # columns are x translation, y translation, rotation about the centroid
+    assert np.allclose(W[0::2, 0], W[0, 0]) and np.allclose(W[1::2, 0], 0)
+    assert np.allclose(W[1::2, 1], W[1, 1]) and np.allclose(W[0::2, 1], 0)
+    p = mesh.points - mesh.points.mean(axis=0)
+    r = np.stack([-p[:, 1], p[:, 0]], axis=1).ravel()
+    np.testing.assert_allclose(W[:, 2], r / np.linalg.norm(r), atol=1e-14)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_stiffness_matches_loop_reference(name):
+    mesh = mesh_of(name)
+    K = dense_K(mesh)
+    K_ref = reference_stiffness(mesh.points, mesh.triangles, MAT.E, MAT.nu, MAT.thickness)
+    assert np.abs(K - K_ref).max() <= 1e-12 * np.abs(K_ref).max()
+
+
+def test_element_stiffness_is_translation_and_scale_free():
+    xy = jnp.array([[0.0, 0.0], [0.02, 0.001], [0.004, 0.015]])
+    k = np.asarray(fem.element_stiffness(xy, 0.3))
+    dN, area = _shape_gradients(np.asarray(xy))
+    assert np.abs(k - k.T).max() <= 1e-15 * np.abs(k).max()
+    np.testing.assert_allclose(np.asarray(fem.element_stiffness(xy * 1000 + 3.0, 0.3)), k, rtol=1e-9, atol=1e-12)
+    ref = reference_stiffness(np.asarray(xy), np.array([[0, 1, 2]]), 1.0, 0.3, 1.0)
+    np.testing.assert_allclose(k, ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_energy_equals_integral_of_paper(name):
+    mesh = mesh_of(name)
+    K = dense_K(mesh)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        u = 1e-3 * rng.standard_normal((mesh.n, 2))
+        U_K = 0.5 * u.ravel() @ K @ u.ravel()
+        U_int = energy_integral(mesh.points, mesh.triangles, u, MAT.E, MAT.nu, MAT.thickness)
+        assert U_K == pytest.approx(U_int, rel=1e-12)
+
+
+# ----------------------------------------------------------------------------- patch test, uniaxial
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", ["lshape", "annulus"])
+def test_patch_test_linear_field(name, method):
+    mesh, op = mesh_of(name), op_of(name, method)
+    a = np.array([2e-4, -1e-4])
+    H = np.array([[1.0e-3, 4.0e-4], [-2.5e-4, -6.0e-4]])
+    u_lin = a + mesh.points @ H.T
+    b = mesh.boundary
+    sol = jsq.deform(op, b, u_lin[b])
+    u = np.asarray(sol.displacement)
+    scale = np.abs(u_lin).max()
+    # every node, interior included, follows the linear field
+    assert np.abs(u[interior(mesh)] - u_lin[interior(mesh)]).max() <= 1e-10 * scale
+    assert np.abs(u - u_lin).max() <= 1e-10 * scale
+    # every element's strain is sym(H)
+    Hs = element_gradients(mesh.points, mesh.triangles, u)
+    eps = 0.5 * (Hs + np.swapaxes(Hs, 1, 2))
+    assert np.abs(eps - 0.5 * (H + H.T)).max() <= 1e-10 * np.abs(H).max()
+    # forces: equilibrium, = K u, = traction of the uniform stress integrated on the boundary
+    f = np.asarray(sol.forces)
+    fscale = np.abs(f).max()
+    assert np.abs(f.sum(axis=0)).max() <= 1e-10 * fscale
+    assert abs(cross(mesh.points[b], f).sum()) <= 1e-10 * fscale * fem.object_length(mesh)
+    Ku = (dense_K(mesh) @ u_lin.ravel()).reshape(-1, 2)
+    assert np.abs(Ku[interior(mesh)]).max() <= 1e-10 * fscale
+    assert rel_err(f, Ku[b]) <= 1e-9
+    e = 0.5 * (H + H.T)
+    E, nu = MAT.E, MAT.nu
+    sx = E / (1 - nu**2) * (e[0, 0] + nu * e[1, 1])
+    sy = E / (1 - nu**2) * (e[1, 1] + nu * e[0, 0])
+    txy = E / (2 * (1 + nu)) * 2 * e[0, 1]
+    sigma = np.array([[sx, txy], [txy, sy]])
+    assert rel_err(f, traction_forces(mesh, sigma, MAT.thickness)[b]) <= 1e-9
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_uniaxial_tension_of_rectangle(method):
+    mesh, op = mesh_of("rectangle"), op_of("rectangle", method)
+    sigma = 1.0e4                                   # Pa, strain 4e-3
+    E, nu, h = MAT.E, MAT.nu, MAT.thickness
+    x, y = mesh.points[:, 0], mesh.points[:, 1]
+    u_exact = np.stack([sigma / E * x, -nu * sigma / E * y], axis=1)
+    b = mesh.boundary
+    sol = jsq.deform(op, b, u_exact[b])
+    f = np.asarray(sol.forces)
+    xb = mesh.points[b, 0]
+    right, left = np.isclose(xb, x.max(), atol=1e-9), np.isclose(xb, x.min(), atol=1e-9)
+    height = np.ptp(y)
+    assert f[right, 0].sum() == pytest.approx(sigma * h * height, rel=1e-9)
+    assert f[left, 0].sum() == pytest.approx(-sigma * h * height, rel=1e-9)
+    # traction-free top and bottom: the remaining (non-end) nodes carry no force
+    fmax = np.abs(f).max()
+    assert np.abs(f[~(right | left)]).max() <= 1e-9 * fmax
+    assert np.abs(f[right | left, 1]).max() <= 1e-9 * fmax
+    u = np.asarray(sol.displacement)
+    assert rel_err(u[interior(mesh)], u_exact[interior(mesh)]) <= 1e-9
+    assert rel_err(u, u_exact) <= 1e-9
+
+
+# ----------------------------------------------------------------------------- builds, direct solve
+def _random_case(mesh, s, rng):
+    nodes = rng.choice(mesh.boundary, size=s, replace=False)
+    d = 1e-3 * rng.standard_normal((s, 2))
+    return nodes, d
+
+
+@pytest.mark.parametrize("name, max_edge", [(n, 0.01) for n in SHAPES] + [("rectangle", 0.005), ("annulus", 0.006)])
+def test_three_builds_agree(name, max_edge):
+    mesh = mesh_of(name, max_edge)
+    ops = {m: op_of(name, m, max_edge) for m in METHODS}
+    rng = np.random.default_rng(1)
+    for s in (range(2, 7) if mesh.n < 200 else (2, 6)):
+        nodes, d = _random_case(mesh, s, rng)
+        sols = {m: jsq.deform(ops[m], nodes, d) for m in METHODS}
+        ref = sols["spectral"]
+        for m in ("sparse", "dense"):
+            assert rel_err(sols[m].forces, ref.forces) <= 1e-9, (m, s)
+            assert rel_err(sols[m].displacement, ref.displacement) <= 1e-9, (m, s)
+            np.testing.assert_allclose(np.asarray(sols[m].displacement)[nodes], d, rtol=0,
+                                       atol=1e-12 * np.abs(d).max())
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", ["rectangle", "annulus"])
+def test_deform_matches_direct_elimination(name, method):
+    mesh, op = mesh_of(name), op_of(name, method)
+    K = dense_K(mesh)
+    rng = np.random.default_rng(2)
+    for s in (2, 3, 5):
+        nodes, d = _random_case(mesh, s, rng)
+        p = np.ravel([[2 * i, 2 * i + 1] for i in nodes])
+        free = np.setdiff1d(np.arange(2 * mesh.n), p)
+        u = np.zeros(2 * mesh.n)
+        u[p] = d.ravel()
+        u[free] = np.linalg.solve(K[np.ix_(free, free)], -K[np.ix_(free, p)] @ d.ravel())
+        reaction = (K @ u)[p].reshape(-1, 2)
+        sol = jsq.deform(op, nodes, d)
+        assert rel_err(sol.forces, reaction) <= 1e-9
+        assert rel_err(sol.displacement, u.reshape(-1, 2)) <= 1e-9
+
+
+# ----------------------------------------------------------------------------- Theorem 3, Corollary 4
+def _blocks(op, nodes):
+    slots = bordered.boundary_slots(op, nodes)
+    dofs = np.asarray(bordered.slot_dofs(jnp.asarray(slots)))
+    return op.G[dofs][:, dofs], op.N[dofs]
+
+
+@pytest.mark.parametrize("name", ["rectangle", "annulus"])
+def test_theorem3_bordered_matrix_nonsingular_iff_two_nodes(name):
+    mesh, op = mesh_of(name), op_of(name, "sparse")
+    rng = np.random.default_rng(3)
+    b = mesh.boundary
+    cases = [b[[0, 1]], b[[0, len(b) // 2]]] + [rng.choice(b, s, replace=False) for s in (2, 2, 3, 3, 6, 6)]
+    for nodes in cases:
+        A, B = _blocks(op, nodes)
+        M = np.asarray(bordered.bordered_matrix(A, B, jnp.ones(len(nodes), bool)))
+        assert M.shape == (2 * len(nodes) + 3,) * 2
+        assert np.abs(M - M.T).max() == 0
+        sv = np.linalg.svd(M, compute_uv=False)
+        assert sv[-1] > 1e-6 * sv[0], (nodes, sv[-1] / sv[0])
+    for node in rng.choice(b, 4, replace=False):
+        A, B = _blocks(op, [node])
+        sv = np.linalg.svd(np.asarray(bordered.bordered_matrix(A, B, jnp.ones(1, bool))), compute_uv=False)
+        assert sv[-1] <= 1e-13 * sv[0]                       # free to rotate about the node
+
+
+def test_bordered_inactive_slots_are_inert():
+    mesh, op = mesh_of("rectangle"), op_of("rectangle", "sparse")
+    nodes = mesh.boundary[[0, 5, 11, 17]]
+    d = 1e-3 * np.random.default_rng(4).standard_normal((4, 2))
+    A, B = _blocks(op, nodes)
+    active = jnp.array([True, False, True, False])
+    M = np.asarray(bordered.bordered_matrix(A, B, active))
+    assert np.linalg.svd(M, compute_uv=False)[-1] > 1e-8
+    f, g = bordered.bordered_solve(A, B, jnp.asarray(d.ravel() / op.length), active)
+    f = np.asarray(f).reshape(-1, 2)
+    assert np.all(f[[1, 3]] == 0)
+    ref = jsq.deform(op, nodes[[0, 2]], d[[0, 2]])
+    np.testing.assert_allclose(f[[0, 2]] * float(op.force_scale), ref.forces, rtol=1e-10, atol=0)
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", ["lshape", "annulus"])
+def test_corollary4_rigid_displacement_gives_zero_force(name, method):
+    mesh, op = mesh_of(name), op_of(name, method)
+    rng = np.random.default_rng(5)
+    t, theta = np.array([3e-3, -2e-3]), 1e-2
+    for s in (2, 4, 6):
+        nodes, d = _random_case(mesh, s, rng)
+        p = mesh.points[nodes]
+        rigid = t + theta * np.stack([-p[:, 1], p[:, 0]], axis=1)
+        deforming = jsq.deform(op, nodes, rigid + d)
+        sol = jsq.deform(op, nodes, rigid)
+        assert np.abs(np.asarray(sol.forces)).max() <= 1e-10 * np.abs(np.asarray(deforming.forces)).max()
+        # the points are centred, so g is exactly (t_x, t_y, theta)
+        np.testing.assert_allclose(np.asarray(sol.g), [*t, theta], rtol=1e-9, atol=1e-15)
+        field = t + theta * np.stack([-mesh.points[:, 1], mesh.points[:, 0]], axis=1)
+        assert rel_err(sol.displacement, field) <= 1e-9
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", SHAPES)
+def test_force_and_torque_equilibrium(name, method):
+    mesh, op = mesh_of(name), op_of(name, method)
+    rng = np.random.default_rng(6)
+    for s in (2, 3, 6):
+        nodes, d = _random_case(mesh, s, rng)
+        f = np.asarray(jsq.deform(op, nodes, d).forces)
+        fmax = np.abs(f).max()
+        assert fmax > 0
+        assert np.abs(f.sum(axis=0)).max() <= 1e-10 * fmax
+        # torque about the centroid, and about any other point (total force is zero)
+        L = fem.object_length(mesh)
+        assert abs(cross(mesh.points[nodes], f).sum()) <= 1e-10 * fmax * L
+        assert abs(cross(mesh.points[nodes] + mesh.offset, f).sum()) <= 1e-10 * fmax * (L + np.abs(mesh.offset).max())
+        if s == 2:   # two-node forces are equal, opposite and along the line joining the nodes
+            dp = mesh.points[nodes[1]] - mesh.points[nodes[0]]
+            assert abs(cross(dp, f[0])) <= 1e-10 * fmax * np.linalg.norm(dp)
+
+
+# ----------------------------------------------------------------------------- errors
+def test_deform_errors():
+    mesh, op = mesh_of("rectangle"), op_of("rectangle", "sparse")
+    b = mesh.boundary
+    with pytest.raises(ValueError, match=r"s >= 2"):
+        jsq.deform(op, b[:1], np.zeros((1, 2)))
+    with pytest.raises(ValueError, match=r"not on the boundary"):
+        jsq.deform(op, [b[0], interior(mesh)[0]], np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=r"not on the boundary"):
+        jsq.deform(op, [b[0], mesh.n + 5], np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=r"duplicates"):
+        jsq.deform(op, [b[0], b[3], b[0]], np.zeros((3, 2)))
+    with pytest.raises(ValueError, match=r"shape \(3, 2\)"):
+        jsq.deform(op, b[:3], np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=r"shape \(2, 2\)"):
+        jsq.deform(op, b[:2], np.zeros(4))
+    with pytest.raises(ValueError, match=r"method"):
+        fem.compliance(mesh, MAT, "cholesky")
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(E=0.0, nu=0.3, thickness=0.01), "E"),
+    (dict(E=-1e6, nu=0.3, thickness=0.01), "E"),
+    (dict(E=float("nan"), nu=0.3, thickness=0.01), "E"),
+    (dict(E=1e6, nu=0.6, thickness=0.01), "nu"),
+    (dict(E=1e6, nu=-1.0, thickness=0.01), "nu"),
+    (dict(E=1e6, nu=0.3, thickness=0.0), "thickness"),
+])
+def test_material_validation(kwargs, field):
+    with pytest.raises(ValueError, match=rf"Material\.{field}="):
+        Material(**kwargs)
+
+
+def test_material_edge_values_accepted():
+    Material(E=1.0, nu=0.5, thickness=1e-6)
+    Material(E=1e9, nu=-0.99, thickness=1.0)
+
+
+# ----------------------------------------------------------------------------- units (DESIGN 2.3)
+@pytest.mark.parametrize("method", ["sparse", "dense"])
+def test_scaling_invariance(method):
+    """Scaling every length by k (object and displacements, thickness kept) leaves strains and
+    stresses unchanged; forces = stress x thickness x edge length grow by k. The scaled
+    compliance G is identical."""
+    k = 1000.0
+    m1 = mesh_of("lshape")
+    mk = jsq.Mesh.from_arrays(m1.points * k, m1.triangles)
+    np.testing.assert_array_equal(mk.boundary, m1.boundary)
+    op1, opk = fem.compliance(m1, MAT, method), fem.compliance(mk, MAT, method)
+    assert float(opk.length) == pytest.approx(k * float(op1.length), rel=1e-14)
+    np.testing.assert_allclose(np.asarray(opk.G), np.asarray(op1.G), rtol=0, atol=1e-12 * np.abs(op1.G).max())
+    np.testing.assert_allclose(np.asarray(opk.points), np.asarray(op1.points), rtol=0, atol=1e-14)
+    rng = np.random.default_rng(7)
+    for s in (2, 5):
+        nodes, d = _random_case(m1, s, rng)
+        s1, sk = jsq.deform(op1, nodes, d), jsq.deform(opk, nodes, k * d)
+        assert rel_err(sk.forces, k * np.asarray(s1.forces)) <= 1e-10
+        assert rel_err(sk.displacement, k * np.asarray(s1.displacement)) <= 1e-10
+        np.testing.assert_allclose(np.asarray(sk.g), np.asarray(s1.g) * [k, k, 1], rtol=1e-8,
+                                   atol=1e-10 * k * np.abs(d).max())
+    # E and thickness only scale forces (E h), never G or displacements
+    mat2 = Material(E=3 * MAT.E, nu=MAT.nu, thickness=0.5 * MAT.thickness)
+    op2 = fem.compliance(m1, mat2, method)
+    np.testing.assert_array_equal(np.asarray(op2.G), np.asarray(op1.G))
+    nodes, d = _random_case(m1, 3, rng)
+    s1, s2 = jsq.deform(op1, nodes, d), jsq.deform(op2, nodes, d)
+    assert rel_err(s2.forces, 1.5 * np.asarray(s1.forces)) <= 1e-12
+    assert rel_err(s2.displacement, s1.displacement) <= 1e-12
+
+
+# ----------------------------------------------------------------------------- tracing
+def test_deform_does_not_retrace():
+    mesh, op = mesh_of("rectangle"), op_of("rectangle", "sparse")
+    rng = np.random.default_rng(8)
+    b = mesh.boundary
+    jsq.deform(op, b[[0, 7, 13]], 1e-3 * rng.standard_normal((3, 2)))
+    size = bordered._deform._cache_size()
+    traces = []
+
+    def listener(event, duration, **kw):
+        if event == "/jax/core/compile/jaxpr_trace_duration" and "_deform" in str(kw.get("fun_name", "")):
+            traces.append(kw.get("fun_name"))
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        for _ in range(3):   # new values and new nodes (same s): no new trace or compile
+            nodes = rng.choice(b, 3, replace=False)
+            jsq.deform(op, nodes, 1e-3 * rng.standard_normal((3, 2)))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert bordered._deform._cache_size() == size
+    assert traces == []
+    # sanity: a new s (used nowhere else) does trace, so the listener would see a retrace
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        jsq.deform(op, b[:11], np.zeros((11, 2)))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert bordered._deform._cache_size() == size + 1
+    assert len(traces) >= 1

@@ -1,0 +1,292 @@
+"""Mesh container, validation, boundary loops, I/O and built-in shapes (Section II)."""
+import meshio
+import numpy as np
+import pytest
+
+from jaxsqueeze import shapes
+from jaxsqueeze.mesh import Mesh, read_mesh, write_mesh
+
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+SQUARE_TRI = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def grid(nx=3, ny=3, w=1.0, h=1.0):
+    """Structured (nx+1)(ny+1)-node grid of 2*nx*ny counterclockwise triangles."""
+    x, y = np.meshgrid(np.linspace(0, w, nx + 1), np.linspace(0, h, ny + 1))
+    pts = np.column_stack([x.ravel(), y.ravel()])
+    i = np.arange(nx)[None, :] + (nx + 1) * np.arange(ny)[:, None]
+    i = i.ravel()
+    tri = np.concatenate([np.stack([i, i + 1, i + nx + 2], 1), np.stack([i, i + nx + 2, i + nx + 1], 1)])
+    return pts, tri
+
+
+def flip_one(tri, k):
+    """Copy of ``tri`` with triangle ``k`` reversed (an inverted element)."""
+    tri = tri.copy()
+    tri[k] = tri[k, ::-1]
+    return tri
+
+
+def areas(m):
+    p = m.points[m.triangles]
+    a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    return 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+
+
+def loop_area(p):
+    q = np.roll(p, -1, axis=0)
+    return 0.5 * np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1])
+
+
+def loops_of(m):
+    return np.split(m.boundary, np.cumsum(m.loops)[:-1])
+
+
+# ----------------------------------------------------------------------------- from_arrays
+
+
+def test_square_basics():
+    m = Mesh.from_arrays(SQUARE + [3.0, 4.0], SQUARE_TRI)
+    assert m.points.dtype == np.float64 and m.triangles.dtype == np.int64
+    assert m.boundary.dtype == np.int64 and m.normals.shape == (4, 2)
+    np.testing.assert_allclose(m.points.mean(axis=0), 0.0, atol=1e-15)
+    np.testing.assert_allclose(m.offset, [3.5, 4.5])
+    np.testing.assert_allclose(m.points + m.offset, SQUARE + [3.0, 4.0])
+    assert m.loops == (4,) and sorted(m.boundary.tolist()) == [0, 1, 2, 3]
+    assert loop_area(m.points[m.boundary]) > 0
+    # Corner normals are the bisectors, pointing away from the centre.
+    np.testing.assert_allclose(m.normals, np.sign(m.points[m.boundary]) / np.sqrt(2), atol=1e-15)
+    # Start node: direction closest to +x from the loop centroid (ties -> smaller angle).
+    np.testing.assert_allclose(m.points[m.boundary[0]], [0.5, -0.5])
+    for a in (m.points, m.triangles, m.boundary, m.normals, m.offset):
+        assert not a.flags.writeable
+    assert m.edge_length() == pytest.approx(1.0)
+    assert m.min_angle() == pytest.approx(45.0)
+
+
+def test_clockwise_is_flipped_and_unused_nodes_dropped():
+    pts = np.vstack([[9.0, 9.0], SQUARE, [7.0, -7.0]])           # nodes 0 and 5 unused
+    m = Mesh.from_arrays(pts, SQUARE_TRI[:, ::-1] + 1)
+    assert m.n == 4 and np.all(areas(m) > 0)
+    np.testing.assert_allclose(m.points + m.offset, SQUARE)      # order of kept nodes preserved
+    np.testing.assert_allclose(m.offset, [0.5, 0.5])
+
+
+def test_boundary_index():
+    pts, tri = grid(3, 3)
+    m = Mesh.from_arrays(pts, tri)
+    assert m.m == 12
+    np.testing.assert_array_equal(m.boundary_index(m.boundary[[3, 0, 7]]), [3, 0, 7])
+    with pytest.raises(ValueError, match=r"nodes 5 are not boundary nodes"):
+        m.boundary_index([0, 5])                                # node 5 is interior
+
+
+@pytest.mark.parametrize("pts, tri, match", [
+    (np.zeros((0, 2)), np.zeros((0, 3), int), "empty mesh"),
+    (SQUARE, np.zeros((0, 3), int), "empty mesh"),
+    (SQUARE, [], "empty mesh"),
+    (np.zeros((4, 3)), SQUARE_TRI, r"points must have shape \(n, 2\)"),
+    (SQUARE, SQUARE_TRI[:, :2], r"triangles must have shape \(t, 3\)"),
+    (np.array([[0, 0], [1, 0], [np.nan, 1], [0, 1.0]]), SQUARE_TRI, r"non-finite .* nodes 2"),
+    (np.array([[0, 0], [1, 0], [1, np.inf], [0, 1.0]]), SQUARE_TRI, r"non-finite"),
+    (SQUARE, np.array([[0, 1, 2], [0, 2, 4]]), r"out of range 0..3 in triangles 1"),
+    (SQUARE, np.array([[0, 1, 2], [0, 2, -1]]), r"out of range"),
+    (np.array([[0, 0], [1, 0], [1, 1], [0, 1], [2, 2.0]]), np.array([[0, 1, 2], [0, 2, 3], [0, 2, 4]]),
+     r"degenerate \(zero-area\) triangles 2"),
+    (SQUARE, np.array([[0, 1, 2], [0, 2, 2]]), r"degenerate"),
+    (np.array([[0, 0], [1, 0], [1, 1], [1, 1], [0, 1.0]]), np.array([[0, 1, 2], [0, 3, 4]]),
+     r"duplicate nodes .* \[2, 3\]"),
+    (grid(2, 2)[0], flip_one(grid(2, 2)[1], 5), r"inverted triangle\(s\) 5 with nodes"),
+    (np.array([[0, 0], [1, 0], [0, 1], [1, 1.0]]), np.array([[0, 1, 2], [1, 2, 3]]),
+     r"inverted triangle\(s\)"),
+])
+def test_validation_errors(pts, tri, match):
+    with pytest.raises(ValueError, match=match):
+        Mesh.from_arrays(pts, tri)
+
+
+def test_non_manifold_edge():
+    pts = np.array([[0, 0], [1, 0], [0.5, 1], [0.5, -1], [0.3, 2.0]])
+    tri = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])          # edge 0-1 in three triangles
+    with pytest.raises(ValueError, match=r"non-manifold edges .*\[0, 1\]"):
+        Mesh.from_arrays(pts, tri)
+
+
+def test_overlapping_triangles_on_same_side():
+    pts = np.array([[0, 0], [1, 0], [0.5, 1], [0.4, 0.5]])
+    with pytest.raises(ValueError, match=r"inverted triangle\(s\)"):
+        Mesh.from_arrays(pts, np.array([[0, 1, 2], [0, 1, 3]]))
+
+
+def test_bow_tie_vertex():
+    # Two squares meeting at one corner, joined by a strip so the triangles are edge-connected.
+    pts, tri = grid(3, 3)
+    keep = ~np.isin(np.arange(len(tri)), [1, 1 + 9, 3, 3 + 9])  # remove cells (1,0) and (0,1)
+    with pytest.raises(ValueError, match=r"bow-tie\) boundary vertices 5"):
+        Mesh.from_arrays(pts, tri[keep])
+    # Two triangles touching at a single vertex only.
+    pts = np.array([[0, 0], [1, 0], [1, 1], [2, 1], [2, 2.0]])
+    with pytest.raises(ValueError, match=r"bow-tie"):
+        Mesh.from_arrays(pts, np.array([[0, 1, 2], [2, 3, 4]]))
+
+
+def test_two_pieces():
+    pts = np.vstack([SQUARE, SQUARE + [3.0, 0.0]])
+    with pytest.raises(ValueError, match=r"2 pieces not connected"):
+        Mesh.from_arrays(pts, np.vstack([SQUARE_TRI, SQUARE_TRI + 4]))
+
+
+def test_grid_with_hole_loops():
+    pts, tri = grid(3, 3)
+    m = Mesh.from_arrays(pts, np.delete(tri, [4, 4 + 9], axis=0))  # remove the centre cell
+    assert m.loops == (12, 4)
+    outer, hole = loops_of(m)
+    assert loop_area(m.points[outer]) == pytest.approx(1.0)
+    assert loop_area(m.points[hole]) == pytest.approx(-1 / 9)
+    # Hole normals point into the hole (toward the centre, which is the origin here).
+    assert np.all(np.sum(m.normals[m.loops[0]:] * m.points[hole], axis=1) < 0)
+
+
+# ----------------------------------------------------------------------------- shapes
+
+
+def test_rectangle():
+    m = shapes.rectangle(0.1, 0.1, 0.004, center=(0.2, -0.1))
+    assert 700 <= m.n <= 900 and len(m.loops) == 1
+    p = m.points[m.boundary] + m.offset - [0.2, -0.1]
+    on_edge = np.isclose(np.abs(p).max(axis=1), 0.05, rtol=0, atol=1e-15)
+    assert np.all(on_edge)
+    assert loop_area(p) == pytest.approx(0.01)
+    assert np.all(areas(m) > 0) and areas(m).sum() == pytest.approx(0.01)
+    corners = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * 0.05
+    for c in corners:                                              # corners are nodes
+        k = np.argmin(np.linalg.norm(p - c, axis=1))
+        assert np.linalg.norm(p[k] - c) < 1e-15
+        np.testing.assert_allclose(m.normals[k], np.sign(c) / np.sqrt(2), atol=1e-14)
+    seg = np.roll(p, -1, axis=0) - p
+    assert np.linalg.norm(seg, axis=1).max() <= 0.004 * (1 + 1e-12)
+    assert m.min_angle() > 20.0
+
+
+def test_disk_exact_circle_and_normals():
+    c = np.array([0.3, 0.7])
+    m = shapes.disk(0.05, 0.003, center=c)
+    p = m.points[m.boundary] + m.offset - c
+    r = np.linalg.norm(p, axis=1)
+    np.testing.assert_allclose(r, 0.05, rtol=1e-12)
+    np.testing.assert_allclose(m.normals, p / r[:, None], atol=1e-3)
+    assert loop_area(p) > 0
+    np.testing.assert_allclose(p[0], [0.05, 0.0], atol=1e-15)     # loop starts toward +x
+    assert areas(m).sum() == pytest.approx(np.pi * 0.05**2, rel=2e-3)
+
+
+def test_ellipse():
+    m = shapes.ellipse(0.06, 0.03, 0.004)
+    p = m.points[m.boundary] + m.offset
+    np.testing.assert_allclose((p[:, 0] / 0.06) ** 2 + (p[:, 1] / 0.03) ** 2, 1.0, rtol=1e-12)
+
+
+def test_annulus():
+    m = shapes.annulus(0.05, 0.02, 0.004, center=(1.0, 1.0))
+    assert len(m.loops) == 2
+    outer, hole = loops_of(m)
+    po = m.points[outer] + m.offset - 1.0
+    ph = m.points[hole] + m.offset - 1.0
+    assert loop_area(po) > 0 > loop_area(ph)
+    np.testing.assert_allclose(np.linalg.norm(po, axis=1), 0.05, rtol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(ph, axis=1), 0.02, rtol=1e-12)
+    nh = m.normals[m.loops[0]:]
+    np.testing.assert_allclose(nh, -ph / np.linalg.norm(ph, axis=1, keepdims=True), atol=1e-3)
+    assert areas(m).sum() == pytest.approx(np.pi * (0.05**2 - 0.02**2), rel=5e-3)
+
+
+def test_l_shape_and_polygon_hole():
+    L = [[0, 0], [0.1, 0], [0.1, 0.04], [0.04, 0.04], [0.04, 0.1], [0, 0.1]]
+    m = shapes.polygon(L, max_edge=0.005)
+    assert areas(m).sum() == pytest.approx(0.1 * 0.04 + 0.04 * 0.06, rel=1e-12)
+    assert loop_area(m.points[m.boundary]) > 0
+    # Clockwise input, with a triangular hole.
+    hole = [[0.01, 0.01], [0.03, 0.01], [0.02, 0.03]]
+    m = shapes.polygon(L[::-1], holes=[hole], max_edge=0.005)
+    assert len(m.loops) == 2
+    assert areas(m).sum() == pytest.approx(0.0064 - 0.0002, rel=1e-12)
+
+
+def test_refinement_makes_edges_shorter_near_point():
+    near = np.array([[0.05, 0.0]])
+    m = shapes.rectangle(0.1, 0.1, 0.005, refine_near=near, refine_edge=0.001, refine_radius=0.004)
+    p = m.points + m.offset
+    e = np.concatenate([m.triangles[:, [0, 1]], m.triangles[:, [1, 2]], m.triangles[:, [2, 0]]])
+    length = np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1)
+    d = np.linalg.norm(0.5 * (p[e[:, 0]] + p[e[:, 1]]) - near, axis=1)
+    assert length[d < 0.004].max() < 0.0025
+    assert length[d < 0.004].mean() < 0.3 * length[d > 0.03].mean()
+    assert m.n > shapes.rectangle(0.1, 0.1, 0.005).n
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda: shapes.polygon([[0, 0], [1, 0]], max_edge=0.1), "at least 3"),
+    (lambda: shapes.polygon([[0, 0], [1, 0], [np.nan, 1]], max_edge=0.1), "non-finite"),
+    (lambda: shapes.polygon([[0, 0], [1, 1], [1, 0], [0, 1]], max_edge=0.1), "edges intersect"),
+    (lambda: shapes.polygon(SQUARE, max_edge=0.0), "max_edge must be a positive"),
+    (lambda: shapes.polygon(SQUARE), "max_edge .* is required"),
+    (lambda: shapes.polygon(SQUARE, holes=[SQUARE + 2], max_edge=0.1), "not inside the outline"),
+    (lambda: shapes.polygon(SQUARE, holes=[SQUARE * 0.5 + 0.7], max_edge=0.1), "edges intersect"),
+    (lambda: shapes.polygon([[0, 0], [1, 0], [1, 1], [1, 0.5]], max_edge=0.1), "folds back"),
+    (lambda: shapes.annulus(0.02, 0.05, 0.01), "r_inner < r_outer"),
+    (lambda: shapes.disk(-1.0, 0.1), "radius must be a positive"),
+    (lambda: shapes.rectangle(1.0, 1.0, 0.1, refine_near=[[0, 0]], refine_edge=0.5), "must not exceed"),
+])
+def test_shape_validation(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_large_rectangle_is_fast():
+    import time
+
+    t = time.perf_counter()
+    m = shapes.rectangle(0.1, 0.1, 0.1 / 140)
+    assert 15_000 < m.n < 30_000
+    assert time.perf_counter() - t < 5.0
+
+
+# ----------------------------------------------------------------------------- I/O
+
+
+@pytest.mark.parametrize("name", ["m.msh", "m.vtu", "m.xdmf"])
+def test_round_trip(tmp_path, name):
+    m = shapes.annulus(0.05, 0.02, 0.01, center=(0.5, 0.25))
+    path = tmp_path / name
+    write_mesh(path, m, point_data={"u": np.arange(m.n, dtype=float)})
+    raw = meshio.read(path)
+    np.testing.assert_array_equal(np.asarray(raw.point_data["boundary"]).ravel() != 0,
+                                  np.isin(np.arange(m.n), m.boundary))
+    r = read_mesh(path)
+    np.testing.assert_allclose(r.points + r.offset, m.points + m.offset, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(r.triangles, m.triangles)
+    np.testing.assert_array_equal(r.boundary, m.boundary)
+    assert r.loops == m.loops
+
+
+def test_read_gmsh22_written_by_meshio(tmp_path):
+    pts, tri = grid(2, 2)
+    path = tmp_path / "g.msh"
+    meshio.write(path, meshio.Mesh(np.column_stack([pts, np.zeros(len(pts))]),
+                                   [("line", np.array([[0, 1]])), ("triangle", tri)]),
+                 file_format="gmsh22")
+    m = read_mesh(path)
+    assert m.n == 9 and len(m.triangles) == 8
+
+
+def test_read_errors(tmp_path):
+    pts3 = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    path = tmp_path / "lines.vtu"
+    meshio.write(path, meshio.Mesh(pts3, [("line", np.array([[0, 1], [1, 2]]))]))
+    with pytest.raises(ValueError, match=r"no triangle cells in .*lines.vtu; found: line"):
+        read_mesh(path)
+    path = tmp_path / "tilted.vtu"
+    tilted = pts3 + [[0, 0, 0], [0, 0, 0.5], [0, 0, 0]]
+    meshio.write(path, meshio.Mesh(tilted, [("triangle", np.array([[0, 1, 2]]))]))
+    with pytest.raises(ValueError, match=r"not planar: nodes 1"):
+        read_mesh(path)
