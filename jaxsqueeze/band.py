@@ -302,9 +302,14 @@ def band_stiffness(band: Band, E: float, project: bool = True, membrane_points: 
     K = 0.5 * (K + K.T)
     if project:
         D = band._dof_scale()
-        Q, _ = np.linalg.qr(D[:, None] * band.rigid_dofs())
+        R = D[:, None] * band.rigid_dofs()
         Ks = K / np.outer(D, D)
-        Ks = Ks - Q @ (Q.T @ Ks)
+        KR = Ks @ R
+        RKR = R.T @ KR
+        tau = 1e-15 * np.linalg.norm(Ks, 2) * np.eye(3) * np.sum(R**2, axis=0)
+        Ks = Ks - KR @ np.linalg.solve(RKR + tau, KR.T)           # energy-optimal removal
+        Q, _ = np.linalg.qr(R)
+        Ks = Ks - Q @ (Q.T @ Ks)                                  # exact null space (round-off level)
         Ks = Ks - (Ks @ Q) @ Q.T
         K = 0.5 * (Ks + Ks.T) * np.outer(D, D)
     return K

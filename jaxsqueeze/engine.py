@@ -382,7 +382,7 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
     seg = (P[j] - P[i]) / jnp.linalg.norm(P[j] - P[i])
     inward = -op.normals[grasp.grip]
     cosines = jnp.array([inward[0] @ seg, -(inward[1] @ seg)])
-    feasible = jnp.all(cosines >= jnp.cos(jnp.arctan(grasp.mu)) - 1e-9)
+    feasible = jnp.all(cosines >= jnp.cos(model.phi) - 1e-9) | (cfg.friction_model == "stick")
 
     E, H = cfg.max_events, cfg.max_steps + 1
     z = jnp.zeros

@@ -164,7 +164,7 @@ def squeeze(scene: Scene) -> SqueezeResult:
 def check_grip(scene: Scene, op: Compliance) -> None:
     """Raise if the segment between the initial contacts leaves either friction cone."""
     g = np.asarray(scene.grip)
-    if g.ndim != 1:
+    if g.ndim != 1 or scene.friction_model == "stick":   # full stick: the cones are half-planes
         return
     pos = {int(v): k for k, v in enumerate(np.asarray(op.nodes))}
     i, j = pos[int(g[0])], pos[int(g[1])]

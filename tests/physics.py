@@ -1,0 +1,72 @@
+"""Shared test helpers: exactly symmetric meshes and the invariants every squeeze state must hold."""
+import numpy as np
+import triangle
+
+import jaxsqueeze as jsq
+
+
+def symmetric_square(a=0.1, max_edge=0.005):
+    """Mesh of [-a/2, a/2]^2, exactly mirror-symmetric about both axes (a quarter, mirrored)."""
+    k = int(np.ceil(a / 2 / max_edge))
+    t = np.linspace(0, a / 2, k + 1)
+    h = a / 2 + 0 * t
+    quarter = np.concatenate([np.c_[t, 0 * t], np.c_[h[1:], t[1:]], np.c_[t[::-1][1:], h[1:]],
+                              np.c_[0 * t[1:-1], t[::-1][1:-1]]])
+    seg = np.c_[np.arange(len(quarter)), (np.arange(len(quarter)) + 1) % len(quarter)]
+    area = 1.5 * np.sqrt(3) / 4 * (max_edge / a) ** 2
+    tri = triangle.triangulate(dict(vertices=quarter / a, segments=seg), f"pq30a{area:.12f}YQ")
+    P, T = tri["vertices"] * a, tri["triangles"]
+    pts, tris, off = [], [], 0
+    for sx, sy in [(1, 1), (-1, 1), (-1, -1), (1, -1)]:
+        pts.append(P * [sx, sy])
+        tris.append((T if sx * sy > 0 else T[:, ::-1]) + off)
+        off += len(P)
+    P, T = np.concatenate(pts), np.concatenate(tris)
+    key = np.round(P / a * 1e9).astype(np.int64)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return jsq.Mesh.from_arrays(P[first], inv.reshape(-1)[T])
+
+
+def nearest(mesh, xy):
+    return jsq.scene.nearest_boundary_node(mesh, xy)
+
+
+def check_states(res, mesh, mu, friction_model="coulomb", rtol=1e-7):
+    """Assert the invariants of every recorded state of a squeeze (SI units)."""
+    P0 = mesh.points[mesh.boundary]
+    scale = max(np.abs(res.forces).max(), 1e-300)
+    L = np.ptp(mesh.points, axis=0).max()
+    r = float(res.radius)
+    for k in range(int(res.count)):
+        F, u, mode, fg = (np.asarray(a[k]) for a in (res.forces, res.boundary_displacement, res.modes, res.finger))
+        C = np.asarray(res.centres[k])
+        x = P0 + u
+        on = mode > 0
+        # equilibrium of forces and torques (linear theory: undeformed lever arms)
+        assert np.abs(F.sum(0)).max() <= rtol * scale, f"row {k}: force imbalance {F.sum(0)}"
+        torque = np.sum(P0[:, 0] * F[:, 1] - P0[:, 1] * F[:, 0])
+        assert abs(torque) <= rtol * scale * L, f"row {k}: torque imbalance {torque}"
+        assert np.all(F[~on] == 0), f"row {k}: force at a free node"
+        # contact nodes exactly on their fingertip circle
+        rel = x - C[np.where(on, fg, 0)]
+        dist = np.linalg.norm(rel, axis=1)
+        assert np.abs(dist[on] - r).max(initial=0) <= 1e-7 * L, f"row {k}: contact node off its circle"
+        # no free node inside a fingertip beyond tolerance
+        for f in (0, 1):
+            gap = np.linalg.norm(x - C[f], axis=1) - r
+            assert gap[~on].min(initial=np.inf) >= -1e-6 * L, f"row {k}: free node inside finger {f}"
+        # force directions: compressive; stick inside the cone; slip on the edge opposing sliding
+        nrm = rel / np.maximum(dist, 1e-300)[:, None]
+        fn = np.sum(F * nrm, 1)
+        ft = nrm[:, 0] * F[:, 1] - nrm[:, 1] * F[:, 0]
+        tol = 1e-6 * scale
+        assert np.all(fn[on] >= -tol), f"row {k}: pulling contact force"
+        stick, pos, neg = mode == 1, mode == 2, mode == 3
+        if friction_model == "frictionless":
+            assert not np.any(stick), f"row {k}: frictionless squeeze reports stick"
+            assert np.abs(ft[on]).max(initial=0) <= tol, f"row {k}: tangential force without friction"
+        elif friction_model == "coulomb":
+            assert np.all(np.abs(ft[stick]) <= mu * fn[stick] + tol), f"row {k}: sticking force outside the cone"
+            slide = pos | neg
+            assert np.allclose(np.abs(ft[slide]), mu * fn[slide], atol=tol, rtol=1e-6), f"row {k}: slip force off the edge"
+            assert np.all(ft[pos] <= tol) and np.all(ft[neg] >= -tol), f"row {k}: friction does not oppose sliding"

@@ -1,0 +1,220 @@
+"""The squeeze grasp (Section IV): invariants, symmetry, friction limits, convergence, JAX properties."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsqueeze as jsq
+from jaxsqueeze import grasp as grasp_mod
+from physics import check_states, nearest, symmetric_square
+
+MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return symmetric_square(0.1, 0.006)
+
+
+@pytest.fixture(scope="module")
+def centred(mesh):
+    """Square squeezed at the midpoints of two opposite edges."""
+    grip = (nearest(mesh, (0, -0.05)), nearest(mesh, (0, 0.05)))
+    return jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.015), grip=grip, friction=0.5,
+                     depth=0.012)
+
+
+@pytest.fixture(scope="module")
+def slanted(mesh):
+    """Grip 12.5° off the normals: the initial contacts slip once the friction margin is used up."""
+    grip = (nearest(mesh, (-0.01, -0.05)), nearest(mesh, (0.01, 0.05)))
+    return jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.015), grip=grip, friction=0.23,
+                     depth=0.012)
+
+
+def finger_force(res, finger, row=-1):
+    on = (res.modes[row] > 0) & (res.finger[row] == finger)
+    return jnp.sum(jnp.where(on[:, None], res.forces[row], 0.0), axis=0)
+
+
+def test_centred_squeeze_is_mirror_symmetric(mesh, centred):
+    res = jsq.squeeze(centred)
+    assert res.outcome == jsq.Status.SUCCESS
+    assert abs(res.final_depth - 0.012) < 1e-12
+    check_states(res, mesh, 0.5)
+    P = mesh.points[mesh.boundary]
+    for row in range(int(res.count)):
+        mode, fg = np.asarray(res.modes[row]), np.asarray(res.finger[row])
+        for f in (0, 1):
+            pts = P[(mode > 0) & (fg == f)]
+            # left-right mirror inside each contact region
+            assert np.allclose(np.sort(pts[:, 0]), np.sort(-pts[:, 0]), atol=1e-12)
+        a = np.sort(P[(mode > 0) & (fg == 0)][:, 0])
+        b = np.sort(P[(mode > 0) & (fg == 1)][:, 0])
+        assert np.allclose(a, b, atol=1e-12), "contact regions differ between the two fingers"
+    f1, f2 = finger_force(res, 0), finger_force(res, 1)
+    np.testing.assert_allclose(f1, -f2, atol=1e-10 * np.abs(f1).max())
+    assert abs(f1[0]) < 1e-8 * abs(f1[1]) and f1[1] > 0
+    # simultaneous events on both fingers are located at the same depth
+    ev = res.events.rows()
+    assert ev and all(k == "A" for _, _, k, _ in ev)
+    depths = np.array([d for d, *_ in ev])
+    assert np.ptp(depths[:4]) < 1e-9
+
+
+def test_slanted_squeeze_slips_and_holds_invariants(mesh, slanted):
+    res = jsq.squeeze(slanted)
+    assert res.outcome == jsq.Status.SUCCESS
+    kinds = [k for _, _, k, _ in res.events.rows()]
+    assert "C" in kinds, kinds
+    check_states(res, mesh, 0.23)
+
+
+def test_large_friction_equals_all_stick(mesh, slanted):
+    big = jsq.squeeze(slanted.replace(friction=1e3))
+    stick = jsq.squeeze(slanted.replace(friction_model="stick"))
+    assert {k for _, _, k, _ in big.events.rows()} == {"A"}
+    assert int(big.count) == int(stick.count)
+    np.testing.assert_allclose(big.forces, stick.forces, atol=1e-10 * np.abs(stick.forces).max())
+    np.testing.assert_allclose(big.displacement, stick.displacement, atol=1e-12)
+    assert np.all(np.asarray(stick.modes) <= 1)
+
+
+def test_small_friction_ends_in_slip_failure():
+    """A disk gripped 10° off its diameter: friction just above tan 10° fails, more friction holds."""
+    disk = jsq.shapes.disk(0.05, 0.005)
+    b = np.radians(10.0)
+    grip = (nearest(disk, 0.05 * np.array([np.sin(b), -np.cos(b)])), nearest(disk, 0.05 * np.array([np.sin(b), np.cos(b)])))
+    scene = jsq.Scene(mesh=disk, material=MAT, fingers=jsq.Fingers(radius=0.015), grip=grip, friction=0.178,
+                      depth=0.01)
+    res = jsq.squeeze(scene)
+    assert res.outcome == jsq.Status.SLIP_FAILURE
+    assert res.final_depth < 0.01
+    last, fg = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
+    assert any(np.all(last[(last > 0) & (fg == f)] >= 2) for f in (0, 1))
+    check_states(res, disk, 0.178)
+    assert jsq.squeeze(scene.replace(friction=0.2)).outcome == jsq.Status.SUCCESS
+
+
+def test_rotating_fingertip_carries_its_sticking_nodes(mesh, centred):
+    """With α2(d) = 40 rad/m · d, a node sticking to finger 2 keeps its finger-frame angle."""
+    twist = jsq.Fingers(radius=0.015, rotation=[[0.0, 0.0], [40.0, 0.0]])
+    res = jsq.squeeze(centred.replace(fingers=twist, friction=0.2))
+    assert res.outcome == jsq.Status.SUCCESS
+    check_states(res, mesh, 0.2)
+    np.testing.assert_allclose(res.alpha[:, 1], 40.0 * res.depth, rtol=1e-12)
+    np.testing.assert_allclose(res.alpha[:, 0], 0.0)
+    x = mesh.points[mesh.boundary] + np.asarray(res.boundary_displacement)
+    rel = x - np.asarray(res.centres)[:, 1][:, None, :]
+    local = np.arctan2(rel[..., 1], rel[..., 0]) - np.asarray(res.alpha)[:, 1][:, None]
+    stuck = (np.asarray(res.modes) == 1) & (np.asarray(res.finger) == 1)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (local - np.asarray(res.theta))))[stuck], 0.0, atol=1e-9)
+    kinds = {k for _, _, k, _ in res.events.rows()}
+    assert {"C", "D"} <= kinds
+
+
+def test_frictionless_never_sticks_and_keeps_neutral_modes_still(mesh, centred):
+    res = jsq.squeeze(centred.replace(friction_model="frictionless"))
+    assert res.outcome == jsq.Status.SUCCESS
+    check_states(res, mesh, 0.0, friction_model="frictionless")
+    # the neutral sideways/rotational mode stays unexcited: the result is mirror symmetric
+    u = np.asarray(res.displacement)
+    P = mesh.points
+    mirror = np.array([np.argmin(np.linalg.norm(P - p * [-1, 1], axis=1)) for p in P])
+    np.testing.assert_allclose(u[mirror] * [-1, 1] - u, 0.0, atol=1e-9 * np.abs(u).max())
+
+
+def test_bad_scene_values_raise(mesh, centred):
+    with pytest.raises(ValueError, match="friction"):
+        centred.replace(friction=-0.1)
+    with pytest.raises(ValueError, match="depth"):
+        centred.replace(depth=0.0)
+    with pytest.raises(ValueError, match="radius"):
+        jsq.Fingers(radius=-1.0)
+    interior = int(np.setdiff1d(np.arange(mesh.n), mesh.boundary)[0])
+    with pytest.raises(ValueError, match="not on the boundary"):
+        centred.replace(grip=(interior, centred.grip[1]))
+    with pytest.raises(ValueError, match="twice"):
+        centred.replace(grip=(centred.grip[0], centred.grip[0]))
+    side = nearest(mesh, (0.05, 0.0))
+    with pytest.raises(ValueError, match="friction cones"):
+        jsq.squeeze(centred.replace(grip=(centred.grip[0], side)))
+
+
+def test_step_and_event_tolerance_converge(slanted):
+    """Halving step and event tolerance converges event depths and final forces."""
+    runs = []
+    for k in range(3):
+        step = 0.012 / (25 * 2**k)
+        res = jsq.squeeze(slanted.replace(settings=jsq.Settings(step=step, event_tol=step * 1e-3)))
+        assert res.outcome == jsq.Status.SUCCESS
+        runs.append(res)
+    ev = [np.array([d for d, *_ in r.events.rows()]) for r in runs]
+    assert all(len(e) == len(ev[0]) for e in ev)
+    d_err = [np.abs(ev[k] - ev[-1]).max() for k in range(2)]
+    f_err = [np.abs(np.asarray(finger_force(runs[k], 1) - finger_force(runs[-1], 1))).max() for k in range(2)]
+    ref = np.abs(np.asarray(finger_force(runs[-1], 1))).max()
+    print(f"event-depth differences {d_err}, force differences {f_err} (ref {ref:.3g} N)")
+    # the located depths carry the implicit-function refinement: already at round-off
+    assert d_err[0] < 1e-9 * 0.012
+    assert max(f_err) < 1e-8 * ref
+
+
+def test_vmap_over_friction_equals_loop(slanted):
+    mus = jnp.array([0.23, 0.3, 1.0])
+
+    def total(mu):
+        return finger_force(jsq.squeeze(slanted.replace(friction=mu)), 1)
+
+    batched = jax.vmap(total)(mus)
+    for k, mu in enumerate(mus):
+        single = total(float(mu))
+        np.testing.assert_allclose(batched[k], single, rtol=1e-10, atol=1e-12 * np.abs(single).max())
+
+
+def test_vmap_over_grips_equals_loop(mesh, centred):
+    grips = jnp.array([centred.grip, (nearest(mesh, (0.006, -0.05)), nearest(mesh, (0.006, 0.05)))])
+
+    def total(g):
+        return finger_force(jsq.squeeze(centred.replace(grip=g)), 1)
+
+    batched = jax.vmap(total)(grips)
+    for k in range(2):
+        single = total(tuple(int(v) for v in grips[k]))
+        np.testing.assert_allclose(batched[k], single, rtol=1e-10, atol=1e-12 * np.abs(single).max())
+
+
+def test_jvp_matches_finite_differences(slanted):
+    """Forward-mode derivatives of the final force w.r.t. friction and depth (away from events)."""
+    def fy(mu, depth):
+        return finger_force(jsq.squeeze(slanted.replace(friction=mu, depth=depth)), 1)[1]
+
+    mu, d = 0.23, 0.012
+    for args, tangent in (((mu, d), (1.0, 0.0)), ((mu, d), (0.0, 1.0))):
+        _, jvp = jax.jvp(fy, args, tangent)
+        h = 1e-6 * np.array(args) * np.array(tangent)
+        fd = (fy(*(np.array(args) + h)) - fy(*(np.array(args) - h))) / (2 * np.linalg.norm(h))
+        assert abs(fd) > 0
+        np.testing.assert_allclose(jvp, fd, rtol=1e-5)
+
+
+def test_event_depth_carries_its_derivative(slanted):
+    """dd_C/dμ of the located stick→slip depth matches finite differences."""
+    def first_c(mu):
+        res = jsq.squeeze(slanted.replace(friction=mu))
+        kinds = res.events.kind
+        k = jnp.argmax(kinds == 2)
+        return res.events.depth[k]
+
+    _, dd = jax.jvp(first_c, (0.23,), (1.0,))
+    h = 1e-6
+    fd = (first_c(0.23 + h) - first_c(0.23 - h)) / (2 * h)
+    assert fd > 0          # more friction: slip starts later
+    np.testing.assert_allclose(dd, fd, rtol=1e-4)
+
+
+def test_second_call_does_not_recompile(slanted):
+    jsq.squeeze(slanted)
+    before = grasp_mod._run._cache_size()
+    jsq.squeeze(slanted.replace(friction=0.4, depth=0.01, fingers=jsq.Fingers(radius=0.02)))
+    assert grasp_mod._run._cache_size() == before
