@@ -7,54 +7,53 @@ Conventions (stated because the paper's formulas depend on them):
     t = dgamma/ds, n = (t_y, -t_x) the OUTWARD normal (the right normal of a CCW curve),
     kappa > 0 where the curve turns left (convex parts of a CCW outline; 1/R on a circle),
     so that dt/ds = -kappa n and dn/ds = kappa t. Then
-        extension        eps  = dalpha/ds + kappa beta,
-        rotation         phi  = kappa alpha - dbeta/ds   (counterclockwise),
+        extension        eps  = t . delta' = dalpha/ds + kappa beta,
+        rotation         phi  = (z x t) . delta' = kappa alpha - dbeta/ds   (counterclockwise),
         curvature change zeta = dphi/ds = -d2beta/ds2 + dkappa/ds alpha + kappa dalpha/ds.
     The paper writes eps = alpha' - kappa beta and zeta = -beta'' - kappa' alpha - kappa alpha'
-    with the Frenet (inward) normal; with beta_paper = -beta these are our eps and -zeta, the
-    same energy. Rigid motions give eps = phi' = 0 exactly: translation v has delta' = 0;
-    rotation omega has delta' = omega z x t, so eps = 0 and phi = omega is constant.
+    with the Frenet (inward) normal; with beta_paper = -beta these are our eps and -zeta, so
+    the energy is the same. Rigid motions give eps = zeta = 0 exactly: a translation has
+    delta' = 0; a rotation omega has delta' = omega z x t, so eps = 0 and phi = omega.
 
 Strain energy U = 1/2 E int (A eps^2 + I zeta^2) ds with A = w h and I = h w^3 / 12, where
     w = ``width``: the wall thickness IN the plane of the curve (the bending dimension), and
-    h = ``height``: the band's extent OUT of the plane (the cutter's height; the paper's
-    "thickness" h = 5 mm, and the thickness of the operator's scaling E h).
+    h = ``height``: the band's extent OUT of the plane (the paper's "thickness" h = 5 mm,
+    and the thickness in the operator's force scale E h L).
     The paper prints U = 1/2 E w int (h eps^2 + h^3/12 zeta^2) ds, i.e. it cubes the
-    dimension it calls h. For in-plane bending of a wall the cubed dimension must be the one
-    lying in the plane, the wall thickness. A cookie cutter is a thin sheet (about 0.4-0.5 mm)
-    standing 5 mm or more tall, so we cube the wall thickness ``width`` (default 0.5 mm) and
-    keep ``height`` (default 5 mm, the paper's value) linear. Reading the paper literally
-    (a 5 mm wall in the plane) is ``width=5e-3`` with ``height`` the out-of-plane size.
+    dimension it calls h. For bending in the plane of the curve the cubed dimension must be
+    the one lying in that plane: the wall thickness. A cookie cutter is a thin sheet
+    (about 0.4-0.5 mm) standing several mm tall, so we cube ``width`` (default 0.5 mm) and
+    keep ``height`` (default 5 mm, the paper's value) linear; this is the paper's formula
+    with its w and h exchanged. The literal reading (a 5 mm wall in the plane, 5^3 times
+    stiffer in bending per unit height) is ``width=5e-3`` with ``height`` the other size.
 
-Discretization: m nodes on the curve, one element between consecutive nodes, DOFs per node
-(alpha, dalpha/ds, beta, dbeta/ds) (ndof = 4 m, node k at 4k..4k+3). Both alpha and beta are
-cubic Hermite (C1) in the curve parameter u: beta needs C1 for its second derivative, and a
-cubic alpha (rather than linear) lets alpha' follow kappa beta, which keeps membrane locking
-small on curved elements. Energy by 5-point Gauss quadrature per element.
+Discretization (isoparametric, Cartesian): the geometry is a periodic cubic spline through
+the m nodes (scipy ``CubicSpline``, ``bc_type='periodic'``), parametrized by arc length
+(chord length, then twice by the spline's own arc length, so J = |dgamma/du| ~ 1); one
+element per spline piece. The displacement is cubic Hermite (C1) in the same parameter u,
+in Cartesian components: DOFs per node (delta_x, delta_y, ddelta_x/ds, ddelta_y/ds)
+(ndof = 4 m, node k at 4k..4k+3). Strains use the exact spline geometry at 5 Gauss points
+per element: eps = gamma_u . delta_u / J^2, phi = (gamma_u x delta_u) / J^2,
+zeta = phi_u / J. Why Cartesian rather than (alpha, beta) Hermite: a rigid rotation
+z x (gamma - c) is itself a cubic in u on each element, so all three rigid motions lie in the
+element space EXACTLY and have zero energy to round-off (no projection needed, no
+dkappa/ds from spline third derivatives), and the inextensible bending modes are
+approximated far better: an (alpha, beta)-Hermite version of this element was 3x too stiff
+for the heart at m = 128 (membrane locking where the curvature varies fast), this one is
+within 0.2% at m = 64. beta needs C1 (zeta holds beta''); Cartesian C1 with the C2 spline
+gives C1 alpha and beta. The node xy displacement is read off directly (``Band.to_xy``);
+alpha = t . delta and beta = n . delta at the nodes.
 
-Geometry: a periodic cubic spline (scipy ``CubicSpline``, ``bc_type='periodic'``) through the
-curve points, parametrized by arc length (chord length, then two re-parametrizations by the
-spline's own arc length, so |dgamma/du| = 1 to about the spline error). t, n, kappa and
-dkappa/ds at nodes and quadrature points come from its derivatives; the exact Jacobian
-J = |dgamma/du| is kept in the chain rule. :meth:`Band.from_function` fits the spline through
-a dense sampling of the function (geometry then is near exact whatever m), with the m nodes
-equally spaced in arc length; :meth:`Band.from_curve` fits it through the given polyline,
-whose points become the nodes.
-
-Rigid modes: cubic Hermite fields reproduce the interpolated rigid motions only up to the
-interpolation error, so the raw stiffness gives them a small energy (relative O(1e-6) at
-m = 64). :func:`band_stiffness` therefore projects them out: K <- P K P with P the orthogonal
-projector (slope DOFs scaled by the mean element length, so all DOFs are lengths) onto the
-complement of the three rigid DOF vectors (which are exact at the nodes). The null space is
-then exactly the rigid motions and the change to K is of the order of the discretization
-error. The nodal xy displacement delta_k = alpha_k t_k + beta_k n_k (matrix ``T``) maps the
-rigid DOF vectors to exact rigid motions, so a self-equilibrated xy load F gives a DOF load
-T^T F orthogonal to them.
+Geometry error enters through the spline through the nodes (O(l^4) in position, O(l^2) in
+curvature, element length l), so :meth:`Band.from_function` only chooses the nodes: m points
+equally spaced in arc length on the exact curve. :func:`band_stiffness` removes the
+round-off-level rigid-mode residue (orthogonal projection), so its null space is exactly
+:meth:`Band.rigid_dofs`.
 
 The operator (:func:`band_compliance`, method "band") uses all m nodes as contact-capable
 nodes: G = E h T K^+ T^T in the scaled units of DESIGN 2.3 (lengths / L, forces / (E h L)),
 L = the larger bounding-box side of the nodes. A thin band is compliant, so G is large
-(about 1e6 for an 8 cm cookie cutter with a 0.5 mm wall); its scale is (L/w)^3.
+(entries of a few 1e5 for an 8 cm cookie cutter with a 0.5 mm wall); it scales as (L/w)^3.
 """
 from __future__ import annotations
 
@@ -65,6 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from .curves import arclength_params
 from .operator import Compliance, FieldMap, rigid_modes
 
 NQ = 5                                                  # Gauss points per element
@@ -85,7 +85,7 @@ def _spline(xy: np.ndarray, iters: int = 2):
     """Periodic cubic spline through closed polyline ``xy`` (n, 2), parametrized by arc length.
 
     Returns (spline, knots (n,), period). Knot spacing starts as chord length and is replaced
-    ``iters`` times by the arc length of the current spline's segments.
+    ``iters`` times by the arc length of the current spline's pieces.
     """
     closed = np.vstack([xy, xy[:1]])
     seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
@@ -102,18 +102,6 @@ def _spline(xy: np.ndarray, iters: int = 2):
     return cs, u[:-1], u[-1]
 
 
-def _geometry(cs, u):
-    """Spline geometry at parameters u (any shape): J, dJ/du, tangent, kappa, dkappa/du."""
-    d1, d2, d3 = cs(u, 1), cs(u, 2), cs(u, 3)
-    J = np.linalg.norm(d1, axis=-1)
-    Ju = np.einsum("...i,...i->...", d1, d2) / J
-    c = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
-    cu = d1[..., 0] * d3[..., 1] - d1[..., 1] * d3[..., 0]
-    kappa = c / J**3
-    kappa_u = cu / J**3 - 3.0 * c * Ju / J**4
-    return J, Ju, d1 / J[..., None], kappa, kappa_u
-
-
 @dataclass(frozen=True, eq=False)
 class Band:
     """Discretized band on a closed counterclockwise curve (build with the class methods).
@@ -122,13 +110,13 @@ class Band:
         points: (m, 2) node positions [m] in the caller's frame.
         tangents: (m, 2) unit tangents t (counterclockwise).
         normals: (m, 2) outward unit normals n = (t_y, -t_x).
-        curvature: (m,) kappa [1/m], > 0 where the curve turns left (convex parts).
+        curvature: (m,) kappa [1/m] of the spline, > 0 where the curve turns left.
         s: (m,) arc length of each node from node 0 [m].
         perimeter: () P [m].
         width: () w [m], wall thickness in the plane (the bending dimension).
         height: () h [m], extent out of the plane.
-        du, jac: (m,) parameter length of element k (nodes k, k+1) and J = ds/du at node k.
-        qJ, qJu, qkappa, qkappa_u: (m, NQ) J, dJ/du, kappa, dkappa/du at Gauss points.
+        du: (m,) parameter length of element k (nodes k, k+1); jac: (m,) J = ds/du at node k.
+        qd1, qd2: (m, NQ, 2) dgamma/du and d2gamma/du2 at the Gauss points of each element.
     """
 
     points: np.ndarray
@@ -141,10 +129,8 @@ class Band:
     height: float
     du: np.ndarray
     jac: np.ndarray
-    qJ: np.ndarray
-    qJu: np.ndarray
-    qkappa: np.ndarray
-    qkappa_u: np.ndarray
+    qd1: np.ndarray
+    qd2: np.ndarray
 
     @property
     def m(self) -> int:
@@ -155,169 +141,131 @@ class Band:
         return 4 * self.m
 
     @classmethod
-    def _build(cls, cs, period, u_nodes, width, height) -> "Band":
-        if not (width > 0 and height > 0):
-            raise ValueError(f"band width and height must be > 0 m, got {width!r}, {height!r}")
-        m = u_nodes.shape[0]
-        du = np.diff(np.append(u_nodes, period))
-        J, _, t, kappa, _ = _geometry(cs, u_nodes)
-        uq = (u_nodes[:, None] + _XI[None, :] * du[:, None]) % period
-        qJ, qJu, _, qk, qku = _geometry(cs, uq)
-        xg, wg = np.polynomial.legendre.leggauss(8)
-        ue = u_nodes[:, None] + 0.5 * (xg + 1.0) * du[:, None]
-        ds = 0.5 * du * (np.linalg.norm(cs(ue % period, 1), axis=-1) @ wg)
-        s = np.concatenate([[0.0], np.cumsum(ds)])
-        return cls(points=cs(u_nodes), tangents=t, normals=np.stack([t[:, 1], -t[:, 0]], axis=1),
-                   curvature=kappa, s=s[:m], perimeter=float(s[m]), width=float(width),
-                   height=float(height), du=du, jac=J, qJ=qJ, qJu=qJu, qkappa=qk, qkappa_u=qku)
-
-    @classmethod
     def from_curve(cls, xy, width: float = 0.5e-3, height: float = 5e-3) -> "Band":
         """Band through the closed counterclockwise polyline ``xy`` (m, 2) [m] (no repeated end).
 
-        The points are the nodes; geometry from the periodic arc-length spline through them,
-        so a smooth outline needs enough points for its curvature (and dkappa/ds) to converge.
+        The points are the nodes and the knots of the periodic arc-length spline that is the
+        band's geometry; use enough of them to resolve the curvature.
         """
         xy = np.asarray(xy, dtype=np.float64)
         if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 4 or not np.all(np.isfinite(xy)):
             raise ValueError(f"xy must be a finite (m, 2) array with m >= 4, got shape {xy.shape}")
-        x, y = xy[:, 0], xy[:, 1]
-        area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
-        if area <= 0:
-            raise ValueError("the band curve must run counterclockwise (positive signed area)")
-        cs, u, period = _spline(xy)
-        return cls._build(cs, period, u, width, height)
-
-    @classmethod
-    def from_function(cls, gamma: Callable, m: int, width: float = 0.5e-3, height: float = 5e-3,
-                      dense: int | None = None) -> "Band":
-        """Band on the closed CCW curve ``gamma(p)`` (p in [0, 1) -> (k, 2) [m]), m nodes.
-
-        Geometry from a spline through ``dense`` samples (default ``max(32 m, 4096)``) at
-        equal steps of p; the m nodes are equally spaced in arc length, node 0 at gamma(0).
-        See :mod:`jaxsqueeze.curves` for outlines.
-        """
-        n = max(32 * m, 4096) if dense is None else int(dense)
-        xy = np.asarray(gamma(np.arange(n) / n), dtype=np.float64)
+        if not (width > 0 and height > 0):
+            raise ValueError(f"band width and height must be > 0 m, got {width!r}, {height!r}")
         x, y = xy[:, 0], xy[:, 1]
         if 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) <= 0:
-            raise ValueError("gamma must run counterclockwise")
+            raise ValueError("the band curve must run counterclockwise (positive signed area)")
+        cs, u, period = _spline(xy)
+        m = u.shape[0]
+        du = np.diff(np.append(u, period))
+        d1, d2 = cs(u, 1), cs(u, 2)
+        J = np.linalg.norm(d1, axis=1)
+        t = d1 / J[:, None]
+        kappa = (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / J**3
+        uq = np.minimum(u[:, None] + _XI[None, :] * du[:, None], period)
+        xg, wg = np.polynomial.legendre.leggauss(8)
+        ue = u[:, None] + 0.5 * (xg + 1.0) * du[:, None]
+        s = np.concatenate([[0.0], np.cumsum(0.5 * du * (np.linalg.norm(cs(ue, 1), axis=-1) @ wg))])
+        return cls(points=xy.copy(), tangents=t, normals=np.stack([t[:, 1], -t[:, 0]], axis=1),
+                   curvature=kappa, s=s[:m], perimeter=float(s[m]), width=float(width),
+                   height=float(height), du=du, jac=J, qd1=cs(uq, 1), qd2=cs(uq, 2))
+
+    @classmethod
+    def from_function(cls, gamma: Callable, m: int, width: float = 0.5e-3, height: float = 5e-3) -> "Band":
+        """Band with m nodes equally spaced in arc length on the closed CCW curve ``gamma``.
+
+        ``gamma(p)``: p in [0, 1) (k,) -> points (k, 2) [m], vectorized (see
+        :mod:`jaxsqueeze.curves`). Node 0 is gamma(0).
+        """
         if m < 4:
             raise ValueError(f"a band needs m >= 4 nodes, got {m}")
-        cs, _, period = _spline(xy)
-        return cls._build(cs, period, np.arange(m) * (period / m), width, height)
+        return cls.from_curve(np.asarray(gamma(arclength_params(gamma, m)), dtype=np.float64), width, height)
 
     def to_xy(self) -> np.ndarray:
-        """T (2m, ndof): nodal xy displacements (interleaved) delta_k = alpha_k t_k + beta_k n_k."""
+        """T (2m, ndof): nodal xy displacements (interleaved x0, y0, x1, ...) from band DOFs."""
         m = self.m
         T = np.zeros((2 * m, 4 * m))
-        k = np.arange(m)
-        for d in range(2):
-            T[2 * k + d, 4 * k] = self.tangents[:, d]
-            T[2 * k + d, 4 * k + 2] = self.normals[:, d]
+        T[np.arange(2 * m), 4 * (np.arange(2 * m) // 2) + np.arange(2 * m) % 2] = 1.0
         return T
 
     def rigid_dofs(self, center=None) -> np.ndarray:
-        """R (ndof, 3): DOFs of x translation, y translation, rotation about ``center``.
-
-        Default center: the node centroid. Columns are exact (at the nodes) for unit
-        translation [m] and unit angle [rad]: alpha = t.v, beta = n.v, alpha' = -kappa n.v,
-        beta' = kappa t.v, with v = z x (x - center) - plus beta' -= 1 for the rotation.
-        """
+        """R (ndof, 3): DOFs of unit x and y translation [m] and unit rotation [rad] about
+        ``center`` (default: the node centroid). Exact: the interpolated fields are rigid."""
         c = self.points.mean(axis=0) if center is None else np.asarray(center, dtype=np.float64)
-        t, n, k = self.tangents, self.normals, self.curvature
-        r = self.points - c
-        vs = [np.tile([1.0, 0.0], (self.m, 1)), np.tile([0.0, 1.0], (self.m, 1)),
-              np.stack([-r[:, 1], r[:, 0]], axis=1)]
+        r, t = self.points - c, self.tangents
         R = np.zeros((4 * self.m, 3))
-        for j, v in enumerate(vs):
-            tv, nv = np.sum(t * v, axis=1), np.sum(n * v, axis=1)
-            R[0::4, j], R[1::4, j], R[2::4, j], R[3::4, j] = tv, -k * nv, nv, k * tv
-        R[3::4, 2] -= 1.0
+        R[0::4, 0] = R[1::4, 1] = 1.0
+        R[0::4, 2], R[1::4, 2], R[2::4, 2], R[3::4, 2] = -r[:, 1], r[:, 0], -t[:, 1], t[:, 0]
         return R
 
+    def alpha_beta(self, dofs) -> np.ndarray:
+        """Tangential and outward normal nodal displacement (m, 2) [m]: (alpha_k, beta_k)."""
+        d = np.asarray(dofs, dtype=np.float64).reshape(self.m, 4)[:, :2]
+        return np.stack([np.sum(d * self.tangents, 1), np.sum(d * self.normals, 1)], axis=1)
+
     def _dof_scale(self) -> np.ndarray:
-        """D (ndof,): 1 on alpha, beta and the mean element length on the slope DOFs."""
-        return np.tile([1.0, self.perimeter / self.m, 1.0, self.perimeter / self.m], self.m)
+        """D (ndof,): 1 on displacements, the mean element length on the slope DOFs."""
+        ell = self.perimeter / self.m
+        return np.tile([1.0, 1.0, ell, ell], self.m)
 
 
-def element_stiffness(du, Ja, Jb, qJ, qJu, qkappa, qkappa_u, EA, EI, membrane_points=NQ) -> np.ndarray:
-    """Element stiffness matrices (e, 8, 8) for element DOFs (alpha, alpha', beta, beta') x 2.
+def element_stiffness(du, Ja, Jb, d1, d2, EA, EI) -> np.ndarray:
+    """Element stiffness matrices (e, 8, 8) for DOFs (dx, dy, dx/ds, dy/ds) at both nodes.
 
     Args:
         du: (e,) parameter length of each element; Ja, Jb: (e,) ds/du at its two nodes.
-        qJ, qJu, qkappa, qkappa_u: (e, NQ) J, dJ/du, kappa, dkappa/du at the Gauss points.
+        d1, d2: (e, NQ, 2) dgamma/du and d2gamma/du2 at the Gauss points.
         EA [N], EI [N m^2]: membrane and bending rigidity.
-        membrane_points: Gauss points for the membrane term (NQ: full; fewer: reduced).
-    Slope DOFs are derivatives in arc length. On a straight element (kappa = 0, J = 1) the
-    beta block is the Euler-Bernoulli beam element, EI/l^3 [[12, 6l, -12, 6l], ...].
+    On a straight element (gamma = (u, 0)) the y block is the Euler-Bernoulli beam element
+    EI/l^3 [[12, 6l, -12, 6l], [6l, 4l^2, -6l, 2l^2], ...] and the x block a cubic bar.
     """
-    def B(xi, J, Ju, k, ku):
-        H, H1, H2 = _hermite(xi)
-        c = np.stack([np.ones_like(du), du * Ja, np.ones_like(du), du * Jb], axis=1)[:, None, :]   # (e,1,4)
-        N0 = H[None] * c
-        N1 = H1[None] * c / du[:, None, None]
-        N2 = H2[None] * c / du[:, None, None] ** 2
-        J, Ju, k, ku = (a[..., None] for a in (J, Ju, k, ku))
-        ia, ib = [0, 1, 4, 5], [2, 3, 6, 7]
-        Be, Bz = np.zeros(N0.shape[:2] + (8,)), np.zeros(N0.shape[:2] + (8,))
-        Be[..., ia] = N1 / J
-        Be[..., ib] = k * N0
-        Bz[..., ia] = (ku * N0 + k * N1) / J
-        Bz[..., ib] = (-N2 / J + N1 * Ju / J**2) / J
-        return Be, Bz
-
-    outer = lambda w, A: np.sum(w[..., None, None] * A[..., :, None] * A[..., None, :], axis=1)  # noqa: E731
-    Be, Bz = B(_XI, qJ, qJu, qkappa, qkappa_u)
-    K = EI * outer(_WQ[None, :] * du[:, None] * qJ, Bz)
-    if membrane_points == NQ:
-        return K + EA * outer(_WQ[None, :] * du[:, None] * qJ, Be)
-    xr, wr = np.polynomial.legendre.leggauss(membrane_points)
-    xr, wr = 0.5 * (xr + 1.0), 0.5 * wr
-    # geometry at the reduced points: J and kappa interpolated from the NQ-point values
-    V = np.polynomial.legendre.legvander(2 * _XI - 1, NQ - 1)
-    Vr = np.polynomial.legendre.legvander(2 * xr - 1, NQ - 1)
-    Pm = Vr @ np.linalg.inv(V)
-    Jr, kr = qJ @ Pm.T, qkappa @ Pm.T
-    Be, _ = B(xr, Jr, Jr, kr, kr)
-    return K + EA * outer(wr[None, :] * du[:, None] * Jr, Be)
+    du = np.asarray(du, dtype=np.float64)
+    e = du.shape[0]
+    _, H1, H2 = _hermite(_XI)
+    c = np.stack([np.ones(e), du * Ja, np.ones(e), du * Jb], axis=1)[:, None, :]     # (e, 1, 4)
+    N1, N2 = H1[None] * c / du[:, None, None], H2[None] * c / du[:, None, None] ** 2
+    ix, iy = [0, 2, 4, 6], [1, 3, 5, 7]
+    dxu, dyu, dxuu, dyuu = (np.zeros((e, NQ, 8)) for _ in range(4))
+    dxu[..., ix], dyu[..., iy], dxuu[..., ix], dyuu[..., iy] = N1, N1, N2, N2
+    gx, gy, gxx, gyy = d1[..., 0, None], d1[..., 1, None], d2[..., 0, None], d2[..., 1, None]
+    J = np.linalg.norm(d1, axis=-1)[..., None]
+    Ju = (gx * gxx + gy * gyy) / J
+    Be = (gx * dxu + gy * dyu) / J**2                                   # eps
+    cross = gx * dyu - gy * dxu                                         # gamma_u x delta_u
+    cross_u = gxx * dyu - gyy * dxu + gx * dyuu - gy * dxuu
+    Bz = (cross_u / J**2 - 2.0 * cross * Ju / J**3) / J                 # zeta = dphi/ds
+    wt = (_WQ[None, :] * du[:, None] * J[..., 0])[..., None, None]
+    return np.sum(wt * (EA * Be[..., :, None] * Be[..., None, :] + EI * Bz[..., :, None] * Bz[..., None, :]), axis=1)
 
 
-def band_stiffness(band: Band, E: float, project: bool = True, membrane_points: int = NQ) -> np.ndarray:
-    """Stiffness K (ndof, ndof) [SI: N/m on alpha, beta; slope DOFs dimensionless] of ``band``.
+def band_stiffness(band: Band, E: float, project: bool = True) -> np.ndarray:
+    """Stiffness K (ndof, ndof) of ``band`` [N/m on displacement DOFs, N on slope DOFs].
 
-    Symmetric PSD. With ``project=True`` (default) the rigid DOF vectors are projected out
-    (module docstring), so the null space is exactly :meth:`Band.rigid_dofs` and rank is
-    ndof - 3; ``project=False`` returns the raw assembled matrix.
+    Symmetric PSD, rank ndof - 3. The rigid DOF vectors have zero energy to round-off;
+    ``project=True`` (default) also removes that round-off (orthogonal projection, slope DOFs
+    scaled by the mean element length), so the null space is exactly :meth:`Band.rigid_dofs`.
     """
     w, h = band.width, band.height
-    EA, EI = E * w * h, E * h * w**3 / 12.0
     m = band.m
-    ke = element_stiffness(band.du, band.jac, np.roll(band.jac, -1), band.qJ, band.qJu,
-                           band.qkappa, band.qkappa_u, EA, EI, membrane_points)
+    ke = element_stiffness(band.du, band.jac, np.roll(band.jac, -1), band.qd1, band.qd2,
+                           E * w * h, E * h * w**3 / 12.0)
     k = np.arange(m)
     dofs = np.concatenate([4 * k[:, None] + np.arange(4), 4 * ((k[:, None] + 1) % m) + np.arange(4)], axis=1)
     K = np.zeros((4 * m, 4 * m))
     np.add.at(K, (dofs[:, :, None], dofs[:, None, :]), ke)
-    K = 0.5 * (K + K.T)
     if project:
         D = band._dof_scale()
-        R = D[:, None] * band.rigid_dofs()
+        Q, _ = np.linalg.qr(D[:, None] * band.rigid_dofs())
         Ks = K / np.outer(D, D)
-        KR = Ks @ R
-        RKR = R.T @ KR
-        tau = 1e-15 * np.linalg.norm(Ks, 2) * np.eye(3) * np.sum(R**2, axis=0)
-        Ks = Ks - KR @ np.linalg.solve(RKR + tau, KR.T)           # energy-optimal removal
-        Q, _ = np.linalg.qr(R)
-        Ks = Ks - Q @ (Q.T @ Ks)                                  # exact null space (round-off level)
+        Ks = Ks - Q @ (Q.T @ Ks)
         Ks = Ks - (Ks @ Q) @ Q.T
-        K = 0.5 * (Ks + Ks.T) * np.outer(D, D)
-    return K
+        K = Ks * np.outer(D, D)
+    return 0.5 * (K + K.T)
 
 
 def band_pinv(band: Band, K: np.ndarray) -> np.ndarray:
-    """Generalized inverse (ndof, ndof) of the projected ``K``: K X b = b for every b orthogonal
-    to the rigid DOF vectors (so X b is a displacement answering any self-equilibrated load)."""
+    """Generalized inverse X (ndof, ndof) of the projected ``K``: K X b = b for every b
+    orthogonal to the rigid DOF vectors (e.g. b = T^T F for a self-equilibrated xy load F)."""
     D = band._dof_scale()
     Q, _ = np.linalg.qr(D[:, None] * band.rigid_dofs())
     Ks = K / np.outer(D, D)
@@ -329,21 +277,20 @@ def band_pinv(band: Band, K: np.ndarray) -> np.ndarray:
 def band_compliance(band: Band, E: float, dtype=None) -> Compliance:
     """Compliance operator (method "band") of ``band`` with Young's modulus ``E`` [Pa].
 
-    All m nodes are contact-capable (``nodes = arange(m)``). Scaled units: L = larger bounding
-    box side [m], stiffness = E h [N/m]; ``G`` (2m, 2m) = E h T K^+ T^T, exact on
-    self-equilibrated loads up to a rigid motion; ``N = rigid_modes(points)``. The field map
-    is G itself (every node of a band is a contact-capable node).
+    All m nodes are contact-capable (``nodes = arange(m)``, ``loops = (m,)``). Scaled units:
+    L = larger bounding-box side of the nodes [m], stiffness = E h [N/m]; ``G`` (2m, 2m) =
+    E h T K^+ T^T, exact on self-equilibrated loads up to a rigid motion;
+    ``N = rigid_modes(points)``; the field map is G itself (a band has no other nodes).
     """
     if not E > 0:
         raise ValueError(f"Young's modulus E must be > 0 Pa, got {E!r}")
-    K = band_stiffness(band, E)
     T = band.to_xy()
-    G = (E * band.height) * (T @ band_pinv(band, K) @ T.T)
+    G = (E * band.height) * (T @ band_pinv(band, band_stiffness(band, E)) @ T.T)
     G = 0.5 * (G + G.T)
     L = float(np.max(np.ptp(band.points, axis=0)))
     pts = (band.points - band.points.mean(axis=0)) / L
+    arr = lambda a: jnp.asarray(a, dtype)   # noqa: E731
     return Compliance(
-        points=jnp.asarray(pts, dtype), normals=jnp.asarray(band.normals, dtype), G=jnp.asarray(G, dtype),
-        N=rigid_modes(jnp.asarray(pts, dtype)), length=jnp.asarray(L, dtype),
-        stiffness=jnp.asarray(E * band.height, dtype), nodes=jnp.arange(band.m),
+        points=arr(pts), normals=arr(band.normals), G=arr(G), N=rigid_modes(arr(pts)),
+        length=arr(L), stiffness=arr(E * band.height), nodes=jnp.arange(band.m),
         method="band", loops=(band.m,), field=FieldMap(lambda f, G=G: G @ f, pts))

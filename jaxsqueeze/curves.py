@@ -13,9 +13,9 @@ the paper's band experiments (Fig. 2).
   bottom tip are singular points (zero speed, unbounded curvature). Every Fourier harmonic
   k of (x, y) is damped by ``exp(-(smoothing k)^2)``, which makes the curve regular and
   rounds both points. With the default ``smoothing=0.25`` and ``size=0.08`` (8.0 cm wide,
-  7.4 cm tall) the smallest radius of curvature is about 2.5 mm (at the dimple, where the
-  curvature is negative: the outline is concave there) and 3 mm at the tip; the dimple is
-  about 12% of the height deep.
+  7.4 cm tall) the smallest radius of curvature is about 2.5 mm (at the bottom tip) and
+  3 mm at the dimple (where the curvature is negative: the outline is concave there); the
+  dimple is about 12% of the height deep, the perimeter about 24.7 cm.
 - :func:`leaf` -- a lens with rounded tips: ``x = a cos t``,
   ``y = b sin t sqrt(sin^2 t + e^2) / sqrt(1 + e^2)`` with half-length ``a = length/2``,
   half-width ``b = width/2`` and ``e`` chosen so that the tip radius of curvature is ``tip``.

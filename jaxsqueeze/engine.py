@@ -29,6 +29,8 @@ from .status import Status
 FREE, STICK, SLIP_POS, SLIP_NEG = 0, 1, 2, 3   # per-node modes; SLIP_POS slides toward larger θ
 EVENT_KINDS = "ABCD"                          # new contact, break, stick→slip, slip→stick
 RUNNING = -1
+CONE_SLACK = 1e-4   # [rad] an initial contact this close to its cone edge counts as inside
+NEUTRAL_RTOL = 1e-3   # frictionless: singular directions below this fraction count as neutral
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -164,11 +166,11 @@ def slip_residual(model: Model, c: Contacts, th, d):
 
 def _lin_solve(model: Model, J, r):
     if model.cfg.friction_model == "frictionless":
-        # Neutral modes (see docs/numerics.md): a least-norm update (Tikhonov-regularized
-        # normal equations), so a direction the contacts do not resist stays unexcited.
-        JtJ = J.T @ J
-        lam = 1e2 * jnp.finfo(J.dtype).eps * (jnp.trace(JtJ) / J.shape[0] + 1e-30)
-        return jnp.linalg.solve(JtJ + lam * jnp.eye(J.shape[0], dtype=J.dtype), J.T @ r)
+        # Neutral modes (docs/numerics.md): a frictionless object between round tips can spin
+        # or drift sideways at (almost) no cost. A truncated pseudo-inverse leaves every
+        # direction the contacts resist less than NEUTRAL_RTOL of the stiffest one where it
+        # is, so such a mode stays unexcited instead of swinging.
+        return jnp.linalg.pinv(J, rtol=NEUTRAL_RTOL) @ r
     return jnp.linalg.solve(J, r)
 
 
@@ -381,8 +383,8 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
     # the segment between the initial contacts must lie inside both friction cones
     seg = (P[j] - P[i]) / jnp.linalg.norm(P[j] - P[i])
     inward = -op.normals[grasp.grip]
-    cosines = jnp.array([inward[0] @ seg, -(inward[1] @ seg)])
-    feasible = jnp.all(cosines >= jnp.cos(model.phi) - 1e-9) | (cfg.friction_model == "stick")
+    angles = jnp.arccos(jnp.clip(jnp.array([inward[0] @ seg, -(inward[1] @ seg)]), -1.0, 1.0))
+    feasible = jnp.all(angles <= model.phi + CONE_SLACK) | (cfg.friction_model == "stick")
 
     E, H = cfg.max_events, cfg.max_steps + 1
     z = jnp.zeros

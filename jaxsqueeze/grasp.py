@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .engine import Config, Grasp, simulate
+from .engine import CONE_SLACK, Config, Grasp, simulate
 from .material import _concrete
 from .operator import Compliance, field_displacement
 from .scene import Scene
@@ -172,7 +172,7 @@ def check_grip(scene: Scene, op: Compliance) -> None:
     seg = (P[j] - P[i]) / np.linalg.norm(P[j] - P[i])
     ang = np.degrees(np.arccos(np.clip([-N[i] @ seg, N[j] @ seg], -1, 1)))
     half = np.degrees(np.arctan(float(scene.friction))) if scene.friction_model == "coulomb" else 0.0
-    if np.any(ang > half + 1e-6):
+    if np.any(ang > half + np.degrees(CONE_SLACK)):
         raise ValueError(
             f"grip {tuple(int(v) for v in g)}: the segment between the two contacts makes {ang[0]:.3g}° and "
             f"{ang[1]:.3g}° with the inward normals, but the friction cones only allow {half:.3g}° "

@@ -129,6 +129,9 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             sign = np.where(modes[k] == SLIP_POS, 1.0, -1.0)
             t = sign[:, None] * np.stack([-np.sin(world), np.cos(world)], axis=1)
             L = 0.3 * rad * MM
+            if zoom is not None:   # arrows a tenth of the close-up's width
+                L = 0.1 * float(np.diff(ax.get_xlim())[0]) if np.ndim(zoom[0]) != 1 or np.ndim(zoom[1]) != 0 \
+                    else 0.2 * float(zoom[1]) * MM
             ax.quiver(X_b[k, 0], X_b[k, 1], t[:, 0] * L, t[:, 1] * L, color=SLIP_COLOR, angles="xy",
                       scale_units="xy", scale=1, width=0.006, zorder=7)
     handles, labels = ax.get_legend_handles_labels()

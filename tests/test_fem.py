@@ -14,73 +14,26 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
+import jaxsqueeze.shapes as shapes
 from jaxsqueeze import bordered, fem
 from jaxsqueeze.material import Material
-
-try:  # meshes come from jaxsqueeze.shapes when it exists
-    import jaxsqueeze.shapes as shapes
-except ImportError:  # pragma: no cover - until shapes.py lands
-    shapes = None
 
 MAT = Material(E=2.5e6, nu=0.35, thickness=0.01)
 METHODS = ("sparse", "dense", "spectral")
 
 
 # ----------------------------------------------------------------------------- meshes
-def _circle(r, max_edge, cw=False):
-    k = max(8, int(np.ceil(2 * np.pi * r / max_edge)))
-    t = 2 * np.pi * np.arange(k) / k
-    p = r * np.stack([np.cos(t), np.sin(t)], axis=1)
-    return p[::-1] if cw else p
-
-
-def _local_polygon(vertices, holes=(), max_edge=0.01):
-    """Quality triangle mesh of a polygon with polygonal holes (fallback until shapes lands)."""
-    import triangle
-
-    loops = [np.asarray(vertices, float)] + [np.asarray(h, float) for h in holes]
-    verts, segs, start = [], [], 0
-    for lp in loops:
-        k = len(lp)
-        verts.append(lp)
-        segs.append(start + np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
-        start += k
-    data = dict(vertices=np.concatenate(verts), segments=np.concatenate(segs))
-    if holes:
-        data["holes"] = np.array([np.mean(h, axis=0) for h in loops[1:]])
-    area = np.sqrt(3) / 4 * max_edge**2
-    out = triangle.triangulate(data, f"pq30a{area:.12g}")
-    return jsq.Mesh.from_arrays(out["vertices"], out["triangles"])
-
-
-def _refine(loop, max_edge):
-    """Split polygon edges so no boundary edge exceeds max_edge (keeps boundary nodes exact)."""
-    loop = np.asarray(loop, float)
-    out = []
-    for a, b in zip(loop, np.roll(loop, -1, axis=0)):
-        k = max(1, int(np.ceil(np.linalg.norm(b - a) / max_edge)))
-        out.extend(a + (b - a) * i / k for i in range(k))
-    return np.array(out)
-
-
 L_SHAPE = [(0, 0), (0.08, 0), (0.08, 0.03), (0.03, 0.03), (0.03, 0.07), (0, 0.07)]
 
 
 @functools.lru_cache(maxsize=None)
 def mesh_of(name: str, max_edge: float = 0.01) -> jsq.Mesh:
     if name == "rectangle":      # 0.1 m x 0.06 m
-        if shapes is not None:
-            return shapes.rectangle(0.1, 0.06, max_edge)
-        w, h = 0.05, 0.03
-        return _local_polygon(_refine([(-w, -h), (w, -h), (w, h), (-w, h)], max_edge), max_edge=max_edge)
-    if name == "annulus":        # r 0.05 / 0.02 m, a hole
-        if shapes is not None:
-            return shapes.annulus(0.05, 0.02, max_edge)
-        return _local_polygon(_circle(0.05, max_edge), [_circle(0.02, max_edge, cw=True)], max_edge)
+        return shapes.rectangle(0.1, 0.06, max_edge)
+    if name == "annulus":        # r 0.05 / 0.02 m: a hole
+        return shapes.annulus(0.05, 0.02, max_edge)
     if name == "lshape":         # non-convex polygon
-        if shapes is not None:
-            return shapes.polygon(L_SHAPE, max_edge=max_edge)
-        return _local_polygon(_refine(L_SHAPE, max_edge), max_edge=max_edge)
+        return shapes.polygon(L_SHAPE, max_edge=max_edge)
     raise KeyError(name)
 
 

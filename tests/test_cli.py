@@ -1,0 +1,243 @@
+"""The command line end to end: demo, run, outputs, and bad scene files (exit status 2)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import meshio
+import numpy as np
+import pytest
+
+import jaxsqueeze as jsq
+from jaxsqueeze import cli, scenefile, views
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# The demo is run on a coarse mesh; the `run` scene below builds the very same mesh (same
+# max_edge, refine_edge and refine_radius), so both share one compiled squeeze.
+COARSE = ["--max-edge", "0.02", "--refine-edge", "0.003"]
+
+SCENE = """\
+title = "coarse foam square"
+
+[object]
+shape = "rectangle"
+width = 0.1
+height = 0.1
+max_edge = 0.02
+refine_edge = 0.003
+refine_radius = 0.012
+
+[material]
+E = 1.0e5
+nu = 0.3
+thickness = 0.0254
+
+[fingers]
+radius = 0.01
+
+[grip]
+points = [[-0.005, -0.05], [0.005, 0.05]]
+
+[squeeze]
+depth = 0.01
+friction = 0.3
+
+[accuracy]
+capacity = 64
+max_steps = 400
+precision = "float64"
+"""
+
+OUTPUTS = ["summary.json", "deformed.png", "force_profile.png", "sliding_profile.png", "events.png",
+           "squeeze.xdmf", "squeeze.h5", "final.vtu"]
+
+
+@pytest.fixture(scope="module")
+def demo_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "demo"
+    rc = cli.main(["demo", "--out", str(out), "-q", *COARSE])
+    assert rc == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    base = tmp_path_factory.mktemp("run")
+    path = base / "scene.toml"
+    path.write_text(SCENE)
+    out = base / "out"
+    rc = cli.main(["run", str(path), "--out", str(out), "-q"])
+    assert rc == 0
+    return path, out
+
+
+def _check_outputs(out):
+    for name in OUTPUTS:
+        p = out / name
+        assert p.is_file(), f"missing {name}"
+        assert p.stat().st_size > 0, f"empty {name}"
+    for name in OUTPUTS:
+        if name.endswith(".png"):
+            assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_demo_writes_everything(demo_dir):
+    _check_outputs(demo_dir)
+    s = json.loads((demo_dir / "summary.json").read_text())
+    assert s["status"] == "SUCCESS"
+    assert s["final_depth"] == pytest.approx(0.015)
+    assert set(s["timings"]) >= {"meshing", "operator", "squeeze", "total"}
+    assert s["n_events"] == len(s["events"]) and s["n_events"] > 0
+
+
+def test_run_matches_python(run_dir):
+    path, out = run_dir
+    _check_outputs(out)
+    s = json.loads((out / "summary.json").read_text())
+    spec = scenefile.load(path)
+    res = jsq.squeeze(spec.scene)
+    assert s["status"] == res.outcome.name
+    assert s["final_depth"] == pytest.approx(res.final_depth, rel=1e-12)
+    assert s["n_events"] == len(res.events)
+    assert s["event_sequence"] == "".join(r[2] for r in res.events.rows())
+    assert s["rows"] == len(res.depth)
+    tf = res.total_force[-1]
+    for f in (0, 1):
+        np.testing.assert_allclose(s["total_force"][f"finger{f + 1}"], tf[f], rtol=1e-9, atol=1e-12)
+        reg = views.contact_regions(res)[f]
+        assert s["contact_regions"][f"finger{f + 1}"]["n_stick"] == sum(r["n_stick"] for r in reg)
+
+
+def test_xdmf_reads_back(run_dir):
+    path, out = run_dir
+    spec = scenefile.load(path)
+    mesh = spec.scene.mesh
+    s = json.loads((out / "summary.json").read_text())
+    with meshio.xdmf.TimeSeriesReader(str(out / "squeeze.xdmf")) as reader:
+        points, cells = reader.read_points_cells()
+        assert points.shape == (mesh.n, 3)
+        np.testing.assert_allclose(points[:, :2], mesh.points + mesh.offset)
+        assert reader.num_steps == s["rows"]
+        depths = []
+        for k in range(reader.num_steps):
+            t, pd, _ = reader.read_data(k)
+            assert t == k
+            for name in ("displacement", "boundary_displacement", "contact_force"):
+                assert pd[name].shape == (mesh.n, 3)
+                assert np.all(pd[name][:, 2] == 0)
+            for name in ("mode", "finger", "full_field", "depth"):
+                assert pd[name].shape == (mesh.n,)
+            assert np.all(pd["full_field"] == 1)
+            interior = np.setdiff1d(np.arange(mesh.n), mesh.boundary)
+            assert np.all(pd["mode"][interior] == -1)
+            # boundary nodes: the full field agrees with the recorded boundary displacement
+            np.testing.assert_allclose(pd["displacement"][mesh.boundary], pd["boundary_displacement"][mesh.boundary],
+                                       atol=1e-12)
+            depths.append(pd["depth"][0])
+        assert depths[-1] == pytest.approx(s["final_depth"])
+        # the last step is the final state of the summary: forces sum to the totals
+        F = pd["contact_force"]
+        finger = pd["finger"]
+        for f in (1, 2):
+            np.testing.assert_allclose(F[finger == f, :2].sum(0), s["total_force"][f"finger{f}"], atol=1e-9)
+    vtu = meshio.read(out / "final.vtu")
+    assert vtu.point_data["displacement"].shape == (mesh.n, 3)
+
+
+def test_help_subprocess():
+    r = subprocess.run([sys.executable, "-m", "jaxsqueeze", "--help"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0
+    assert "jaxsqueeze run" in r.stdout and "examples:" in r.stdout
+
+
+def test_demo_scene_is_packaged(capsys):
+    assert cli.main(["demo", "--print-scene"]) == 0
+    text = capsys.readouterr().out
+    assert "[material]" in text and "foam" in text
+
+
+def test_example_scene_reads_mesh_file():
+    spec = scenefile.load(os.path.join(ROOT, "examples", "foam_disk.toml"))
+    mesh = spec.scene.mesh
+    assert mesh.n > 100 and len(mesh.loops) == 1
+    p = mesh.points[list(spec.scene.grip)] + mesh.offset
+    np.testing.assert_allclose(p, [[0.0, -0.04], [0.006946, 0.039392]], atol=1e-3)  # nearest nodes
+
+
+# ----------------------------------------------------------------------------- bad scene files
+def _line_only_mesh(tmp_path):
+    path = tmp_path / "lines.vtu"
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0]], float)
+    meshio.write(path, meshio.Mesh(pts, [("line", np.array([[0, 1], [1, 2]]))]))
+    return path.name
+
+
+def _interior_node():
+    mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02)   # the mesh of the unrefined scene below
+    return int(np.setdiff1d(np.arange(mesh.n), mesh.boundary)[0])
+
+
+BAD = {
+    "unknown key": ("material.colour", lambda s: s.replace("nu = 0.3", "nu = 0.3\ncolour = 1")),
+    "unknown table": ("output", lambda s: s + "\n[output]\nformat = 'png'\n"),
+    "unknown top-level key": ("name", lambda s: "name = 'x'\n" + s),
+    "nu out of range": ("material.nu", lambda s: s.replace("nu = 0.3", "nu = 0.7")),
+    "E as a string": ("material.E", lambda s: s.replace("E = 1.0e5", 'E = "nan"')),
+    "E nan": ("material.E", lambda s: s.replace("E = 1.0e5", "E = nan")),
+    "negative radius": ("fingers.radius", lambda s: s.replace("radius = 0.01", "radius = -0.01")),
+    "zero depth": ("squeeze.depth", lambda s: s.replace("depth = 0.01", "depth = 0")),
+    "depth too large": ("squeeze.depth", lambda s: s.replace("depth = 0.01", "depth = 0.2")),
+    "negative friction": ("squeeze.friction", lambda s: s.replace("friction = 0.3", "friction = -0.1")),
+    "missing object": ("object", lambda s: s[:s.index("[object]")] + s[s.index("[material]"):]),
+    "missing material key": ("material.thickness", lambda s: s.replace("thickness = 0.0254\n", "")),
+    "unknown shape": ("object.shape", lambda s: s.replace('"rectangle"', '"hexagon"')),
+    "missing shape size": ("object.height", lambda s: s.replace("height = 0.1\n", "")),
+    "refine edge too big": ("object.refine_edge", lambda s: s.replace("refine_edge = 0.003", "refine_edge = 0.05")),
+    "shape and mesh file": ("object", lambda s: s.replace("[object]", '[object]\nmesh_file = "x.msh"')),
+    "grip node interior": ("grip.nodes", lambda s: s.replace(
+        "points = [[-0.005, -0.05], [0.005, 0.05]]", f"nodes = [0, {_interior_node()}]").replace(
+        "refine_edge = 0.003\nrefine_radius = 0.012\n", "")),
+    "grip node missing": ("grip.nodes", lambda s: s.replace(
+        "points = [[-0.005, -0.05], [0.005, 0.05]]", "nodes = [0, 99999]").replace(
+        "refine_edge = 0.003\nrefine_radius = 0.012\n", "")),
+    "grip outside cones": ("grip.points", lambda s: s.replace("[[-0.005, -0.05], [0.005, 0.05]]",
+                                                                "[[-0.04, -0.05], [0.04, 0.05]]")),
+    "grip bad shape": ("grip.points", lambda s: s.replace("[[-0.005, -0.05], [0.005, 0.05]]", "[[0.0, 0.05]]")),
+    "both grip kinds": ("grip", lambda s: s.replace("[grip]", "[grip]\nnodes = [1, 2]")),
+    "bad precision": ("accuracy.precision", lambda s: s.replace('"float64"', '"float16"')),
+    "zero capacity": ("accuracy.capacity", lambda s: s.replace("capacity = 64", "capacity = 0")),
+    "float capacity": ("accuracy.capacity", lambda s: s.replace("capacity = 64", "capacity = 6.4")),
+    "bad friction model": ("squeeze.friction_model", lambda s: s.replace("friction = 0.3", 'friction = 0.3\nfriction_model = "viscous"')),
+    "not toml": ("file", lambda s: s.replace("[material]", "[material")),
+    "mesh file missing": ("object.mesh_file", lambda s: s.replace(
+        s[s.index("[object]"):s.index("[material]")], '[object]\nmesh_file = "nope.msh"\n\n').replace(
+        "[[-0.005, -0.05], [0.005, 0.05]]", "[[0, 0], [1, 1]]")),
+    "mesh file without triangles": ("object.mesh_file", lambda s: s.replace(
+        s[s.index("[object]"):s.index("[material]")], '[object]\nmesh_file = "lines.vtu"\n\n')),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_scene_file(case, tmp_path, capsys):
+    key, edit = BAD[case]
+    _line_only_mesh(tmp_path)
+    text = edit(SCENE)
+    assert text != SCENE
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    rc = cli.main(["run", str(path), "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert err and err[-1].startswith(f"error: {key}: "), err
+    assert not out.exists()
+
+
+def test_bad_size_option(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert cli.main(["demo", "--out", str(out), "--max-edge", "-1"]) == 2
+    assert capsys.readouterr().err.startswith("error: --max-edge: ")
+    assert not out.exists()
