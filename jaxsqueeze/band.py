@@ -57,7 +57,7 @@ L = the larger bounding-box side of the nodes. A thin band is compliant, so G is
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import jax.numpy as jnp
@@ -106,8 +106,20 @@ def _spline(xy: np.ndarray, iters: int = 2):
 class Band:
     """Discretized band on a closed counterclockwise curve (build with the class methods).
 
+    Frame (the same convention as :class:`~jaxsqueeze.mesh.Mesh`): ``points`` are translated
+    so that the node centroid is at the origin, and ``offset`` (2,) is that centroid in the
+    caller's frame, so ``points + offset`` are the coordinates the band was built from. The
+    squeeze results (``res.centres``, ``res.boundary_displacement``) and the operator
+    (``op.points * op.length == points``) are in this centroid frame; plots, scene files
+    (``grip.points``) and :func:`jaxsqueeze.scene.nearest_boundary_node` use the caller's.
+
+    Mesh-like read-only views so that code written for meshes reads a band as its boundary:
+    ``n == m`` (every node is a boundary node), ``boundary == arange(m)``, ``loops == (m,)``,
+    ``triangles`` (0, 3) (a band has no area elements; see :meth:`segments` for its polyline).
+
     Attributes:
-        points: (m, 2) node positions [m] in the caller's frame.
+        points: (m, 2) node positions [m], node centroid at the origin.
+        offset: (2,) node centroid in the caller's frame [m].
         tangents: (m, 2) unit tangents t (counterclockwise).
         normals: (m, 2) outward unit normals n = (t_y, -t_x).
         curvature: (m,) kappa [1/m] of the spline, > 0 where the curve turns left.
@@ -131,10 +143,36 @@ class Band:
     jac: np.ndarray
     qd1: np.ndarray
     qd2: np.ndarray
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     @property
     def m(self) -> int:
         return int(self.points.shape[0])
+
+    @property
+    def n(self) -> int:
+        """Number of nodes (all on the boundary), as ``Mesh.n``."""
+        return self.m
+
+    @property
+    def boundary(self) -> np.ndarray:
+        """(m,) ``arange(m)``: every node can touch a finger (as ``Mesh.boundary``)."""
+        return np.arange(self.m)
+
+    @property
+    def loops(self) -> tuple:
+        """``(m,)``: one closed counterclockwise loop (as ``Mesh.loops``)."""
+        return (self.m,)
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """(0, 3): a band has no triangles (its polyline is :meth:`segments`)."""
+        return np.zeros((0, 3), np.int64)
+
+    def segments(self) -> np.ndarray:
+        """(m, 2) node pairs (k, k + 1 mod m) of the closed polyline through the nodes."""
+        k = np.arange(self.m)
+        return np.stack([k, (k + 1) % self.m], axis=1)
 
     @property
     def ndof(self) -> int:
@@ -166,7 +204,8 @@ class Band:
         xg, wg = np.polynomial.legendre.leggauss(8)
         ue = u[:, None] + 0.5 * (xg + 1.0) * du[:, None]
         s = np.concatenate([[0.0], np.cumsum(0.5 * du * (np.linalg.norm(cs(ue, 1), axis=-1) @ wg))])
-        return cls(points=xy.copy(), tangents=t, normals=np.stack([t[:, 1], -t[:, 0]], axis=1),
+        offset = xy.mean(axis=0)
+        return cls(points=xy - offset, offset=offset, tangents=t, normals=np.stack([t[:, 1], -t[:, 0]], axis=1),
                    curvature=kappa, s=s[:m], perimeter=float(s[m]), width=float(width),
                    height=float(height), du=du, jac=J, qd1=cs(uq, 1), qd2=cs(uq, 2))
 
@@ -190,13 +229,19 @@ class Band:
 
     def rigid_dofs(self, center=None) -> np.ndarray:
         """R (ndof, 3): DOFs of unit x and y translation [m] and unit rotation [rad] about
-        ``center`` (default: the node centroid). Exact: the interpolated fields are rigid."""
+        ``center`` (centroid frame; default: the node centroid, the origin). Exact: the interpolated fields are rigid."""
         c = self.points.mean(axis=0) if center is None else np.asarray(center, dtype=np.float64)
         r, t = self.points - c, self.tangents
         R = np.zeros((4 * self.m, 3))
         R[0::4, 0] = R[1::4, 1] = 1.0
         R[0::4, 2], R[1::4, 2], R[2::4, 2], R[3::4, 2] = -r[:, 1], r[:, 0], -t[:, 1], t[:, 0]
         return R
+
+    def rotation(self, dofs) -> np.ndarray:
+        """(m,) small rotation phi [rad] (counterclockwise) of the band's cross-section at
+        each node: phi = t x d(delta)/ds, from the slope DOFs."""
+        d = np.asarray(dofs, dtype=np.float64).reshape(self.m, 4)[:, 2:]
+        return self.tangents[:, 0] * d[:, 1] - self.tangents[:, 1] * d[:, 0]
 
     def alpha_beta(self, dofs) -> np.ndarray:
         """Tangential and outward normal nodal displacement (m, 2) [m]: (alpha_k, beta_k)."""

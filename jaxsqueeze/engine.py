@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from . import linalg
 from .bordered import bordered_matrix, slot_dofs
 from .operator import Compliance, field_displacement
 from .status import Status
@@ -132,17 +133,19 @@ class Contacts(NamedTuple):
     theta0: jax.Array   # (S,) anchors (stick) or initial guesses (slip)
     dofs: jax.Array     # (2S,)
     Minv: jax.Array     # (2S + 3, 2S + 3) inverse of the bordered matrix (eq. 4)
+    armed: jax.Array    # (S,) bool: event D may fire (the slip rate was consistent)
 
 
-def pack(model: Model, mode, finger, theta) -> Contacts:
+def pack(model: Model, mode, finger, theta, armed=None) -> Contacts:
     S = model.cfg.capacity
     idx = jnp.nonzero(mode > FREE, size=S, fill_value=0)[0]
     active = jnp.arange(S) < jnp.sum(mode > FREE)
     dofs = slot_dofs(idx)
     G = model.op.G
     M = bordered_matrix(G[dofs][:, dofs], model.op.N[dofs], active)
+    armed = jnp.ones(S, bool) if armed is None else armed[idx]
     return Contacts(idx, active, jnp.where(active, mode[idx], FREE), finger[idx], theta[idx], dofs,
-                    jnp.linalg.inv(M))
+                    linalg.inv(M), armed)
 
 
 def slot_forces(model: Model, c: Contacts, th, d):
@@ -170,8 +173,8 @@ def _lin_solve(model: Model, J, r):
         # or drift sideways at (almost) no cost. A truncated pseudo-inverse leaves every
         # direction the contacts resist less than NEUTRAL_RTOL of the stiffest one where it
         # is, so such a mode stays unexcited instead of swinging.
-        return jnp.linalg.pinv(J, rtol=NEUTRAL_RTOL) @ r
-    return jnp.linalg.solve(J, r)
+        return linalg.gauss_jordan(J, r, rtol=NEUTRAL_RTOL)
+    return linalg.solve(J, r)
 
 
 def slip_angles(model: Model, c: Contacts, d, tol):
@@ -231,6 +234,7 @@ class Solution(NamedTuple):
     kind: jax.Array     # (m,) which event each node's function stands for
     ft: jax.Array       # (m,) tangential force (for the slip sign)
     fn: jax.Array       # (m,) normal force
+    rate: jax.Array     # (m,) slip rate along the sliding direction, s·dθ/dε (0 where not sliding)
 
 
 def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
@@ -255,10 +259,11 @@ def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
     fn = jnp.sum(f * unit(world), -1)
     ft = cross2(unit(world), f)     # f · t with t = (−sin, cos)
     stick = c.mode == STICK
+    rate = jnp.zeros_like(th)
     if model.cfg.slip_events:
         margin = model.mu * fn - jnp.abs(ft)
-        rate = jnp.where(c.mode == SLIP_POS, 1.0, -1.0) * slip_rates(model, c, th, d)
-        other = jnp.where(stick, margin, rate)
+        rate = jnp.where(c.mode == SLIP_POS, 1.0, jnp.where(c.mode == SLIP_NEG, -1.0, 0.0)) * slip_rates(model, c, th, d)
+        other = jnp.where(stick, margin, jnp.where(c.armed, rate, jnp.inf))
         e_slot = jnp.minimum(fn, other)
         k_slot = jnp.where(fn < other, 1, jnp.where(stick, 2, 3))
     else:
@@ -268,8 +273,9 @@ def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
     kind = jnp.zeros(m, jnp.int32).at[safe].set(k_slot, mode="drop")
     fn_full = jnp.zeros(m, f.dtype).at[safe].set(fn, mode="drop")
     ft_full = jnp.zeros(m, f.dtype).at[safe].set(ft, mode="drop")
+    rate_full = jnp.zeros(m, f.dtype).at[safe].set(rate, mode="drop")
     e = jnp.where((mode == FREE) | (kind > 0), e, jnp.inf)
-    return Solution(th, f, g, ok, u, F, e, kind, ft_full, fn_full)
+    return Solution(th, f, g, ok, u, F, e, kind, ft_full, fn_full, rate_full)
 
 
 # ----------------------------------------------------------------------------- loop state
@@ -280,6 +286,7 @@ class State:
     mode: jax.Array         # (m,)
     finger: jax.Array       # (m,)
     theta: jax.Array        # (m,) anchor (stick) or current (slip) polar angle, finger frame
+    armed: jax.Array        # (m,) bool, event D armed (see _arm)
     F: jax.Array            # (m, 2)
     u: jax.Array            # (m, 2)
     g: jax.Array            # (3,)
@@ -301,8 +308,15 @@ def _settle(model: Model, st: State, c: Contacts, sol: Solution, d) -> State:
     """Adopt a solved configuration at depth d (slip angles move, anchors stay)."""
     safe = jnp.where(c.active, c.idx, model.op.m)
     theta = st.theta.at[safe].set(sol.th, mode="drop")
-    return State(d, st.mode, st.finger, theta, sol.F, sol.u, sol.g, st.it, st.status, st.n_ev, st.events,
-                 st.hist, st.count)
+    return dataclasses.replace(st, d=d, theta=theta, F=sol.F, u=sol.u, g=sol.g, armed=_arm(st.armed, sol))
+
+
+def _arm(armed, sol: Solution):
+    """Event D fires when the slip rate *crosses* zero. A node whose slip starts with an
+    inconsistent rate (a jam: neither sticking nor sliding is consistent there) keeps
+    sliding with its force on the cone edge until its rate has been consistent once.
+    This keeps every force admissible and rules out C/D chatter at one depth."""
+    return armed | (sol.rate > 0)
 
 
 def _failure(model: Model, mode, finger):
@@ -340,14 +354,20 @@ def _new_contacts(model: Model, st: State, sol: Solution, kind, d, flag):
     return mode.astype(jnp.int32), finger.astype(jnp.int32), theta, added
 
 
-def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols):
-    """New contacts stick first; one whose force leaves the cone (or pulls) is changed."""
+def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols, slack=0.0):
+    """New contacts stick first; one whose force leaves the cone (or pulls) is changed.
+
+    ``slack`` [rad] widens the cone for this test (the initial contacts get ``CONE_SLACK``,
+    as the grip check does). A contact that found no slot (overflow) is left alone: the
+    caller reports ``Status.OVERFLOW``.
+    """
     c = pack(model, mode, finger, theta)
     sol = solve_at(model, c, mode, d + eta, tols)
-    pull = added & (sol.fn <= 0)
+    slotted = jnp.zeros(mode.shape, bool).at[jnp.where(c.active, c.idx, mode.shape[0])].set(True, mode="drop")
+    pull = added & slotted & (sol.fn <= 0)
     mode = jnp.where(pull, FREE, mode)
     if model.cfg.slip_events:
-        out = added & ~pull & (model.mu * sol.fn < jnp.abs(sol.ft))
+        out = added & slotted & ~pull & (jnp.tan(model.phi + slack) * sol.fn < jnp.abs(sol.ft))
         mode = jnp.where(out, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
     return mode.astype(jnp.int32)
 
@@ -364,7 +384,7 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
     D, h = grasp.depth / L, grasp.step / L
     tols = (grasp.newton_tol, grasp.gap_tol / L)
     ev_tol = grasp.event_tol / L
-    eta = 1e-2 * h
+    eta = jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps)   # probe offset, above round-off in float32
 
     # initial contacts: the grip nodes, sticking (or sliding when frictionless)
     i, j = grasp.grip[0], grasp.grip[1]
@@ -377,7 +397,7 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
     ang = lambda k, f: jnp.arctan2(*(P[k] - C0[f])[::-1]) - a0[f]  # noqa: E731
     theta = jnp.zeros(m, dt).at[i].set(ang(i, 0)).at[j].set(ang(j, 1))
     added = jnp.zeros(m, bool).at[i].set(True).at[j].set(True)
-    mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt), eta, tols) \
+    mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt), eta, tols, CONE_SLACK) \
         if cfg.slip_events else mode
 
     # the segment between the initial contacts must lie inside both friction cones
@@ -388,7 +408,7 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
 
     E, H = cfg.max_events, cfg.max_steps + 1
     z = jnp.zeros
-    st = State(jnp.zeros((), dt), mode, finger, theta, z((m, 2), dt), z((m, 2), dt), z(3, dt),
+    st = State(jnp.zeros((), dt), mode, finger, theta, jnp.zeros(m, bool), z((m, 2), dt), z((m, 2), dt), z(3, dt),
                jnp.array(0, jnp.int32), jnp.array(RUNNING, jnp.int32), jnp.array(0, jnp.int32),
                (z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
                (z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
@@ -405,24 +425,45 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
     def step(st: State) -> State:
         d0 = st.d
         d1 = jnp.minimum(d0 + h, D)
-        c = pack(model, st.mode, st.finger, st.theta)
+        c = pack(model, st.mode, st.finger, st.theta, st.armed)
         s1 = solve_at(model, c, st.mode, d1, tols)
         crossed = jnp.any(s1.e < 0)
-        return lax.cond(crossed, lambda: _event(st, c, d0, d1), lambda: _advance(st, c, s1, d1))
+        return lax.cond(crossed, lambda: _event(st, c, s1, d0, d1), lambda: _advance(st, c, s1, d1))
 
     def _advance(st, c, s1, d1):
         st = _settle(model, st, c, s1, d1)
         return _finish(st, s1.ok)
 
-    def _event(st, c, d0, d1):
-        def bisect(k, br):
-            lo, hi = br
-            mid = 0.5 * (lo + hi)
-            hit = jnp.any(solve_at(model, c, st.mode, mid, tols).e < 0)
-            go = (hi - lo) > ev_tol
-            return (jnp.where(go & ~hit, mid, lo), jnp.where(go & hit, mid, hi))
+    def locate(c, mode, d0, d1, e1):
+        """Bracket the earliest sign change of min_k e_k(d) in [d0, d1] to ``event_tol``.
 
-        lo, hi = lax.fori_loop(0, cfg.bisect_iters, bisect, (d0, d1))
+        Illinois regula falsi (superlinear on smooth crossings) safeguarded by bisection.
+        """
+        E = lambda dd: jnp.min(solve_at(model, c, mode, dd, tols).e)  # noqa: E731
+        e0 = E(d0)
+
+        def cond(s):
+            lo, hi, *_, it = s
+            return (hi - lo > ev_tol) & (it < cfg.bisect_iters)
+
+        def body(s):
+            lo, hi, elo, ehi, side, it = s
+            t = elo / (elo - ehi)
+            t = jnp.where(jnp.isfinite(t) & (it % 4 != 3), jnp.clip(t, 0.01, 0.99), 0.5)
+            mid = lo + t * (hi - lo)
+            em = E(mid)
+            hit = em < 0
+            # Illinois: when the same end survives twice, halve its value
+            elo2 = jnp.where(hit, jnp.where(side == -1, 0.5 * elo, elo), em)
+            ehi2 = jnp.where(hit, em, jnp.where(side == 1, 0.5 * ehi, ehi))
+            return (jnp.where(hit, lo, mid), jnp.where(hit, mid, hi), elo2, ehi2,
+                    jnp.where(hit, -1, 1), it + 1)
+
+        lo, hi, *_ = lax.while_loop(cond, body, (d0, d1, jnp.maximum(e0, 0.0), e1, 0, 0))
+        return lo, hi
+
+    def _event(st, c, s1, d0, d1):
+        lo, hi = locate(c, st.mode, d0, d1, jnp.min(s1.e))
         s_hi = solve_at(model, c, st.mode, hi, tols)
         e_of = lambda dd: solve_at(model, c, st.mode, dd, tols).e  # noqa: E731
         e_hi, de_hi = jax.jvp(e_of, (hi,), (jnp.ones_like(hi),))
@@ -435,6 +476,7 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
         kinds = jnp.where(st.mode == FREE, 0, s_hi.kind)
         mode, finger, theta, added = _new_contacts(model, st, s_star, kinds, d_star, flag)
         if cfg.slip_events or cfg.friction_model == "frictionless":
+            overflow = jnp.sum(mode > FREE) > S
             mode = _test_hypothesis(model, mode, finger, theta, added, d_star, eta, tols)
         # log the events
         nodes = jnp.arange(m)
@@ -446,10 +488,13 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
         n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
         # re-solve with the new modes at d*
         c2 = pack(model, mode, finger, theta)
-        st2 = _with(st, mode=mode, finger=finger, theta=theta, events=events, n_ev=n_ev)
+        changed = mode != st.mode
+        st2 = _with(st, mode=mode, finger=finger, theta=theta, events=events, n_ev=n_ev,
+                    armed=st.armed & ~changed)
         s2 = solve_at(model, c2, mode, d_star, tols)
         st2 = _settle(model, st2, c2, s2, d_star)
-        overflow = jnp.sum(mode > FREE) > S
+        if not (cfg.slip_events or cfg.friction_model == "frictionless"):
+            overflow = jnp.sum(mode > FREE) > S
         st2 = _finish(st2, s2.ok & s_star.ok)
         st2 = _with(st2, status=jnp.where(overflow, Status.OVERFLOW,
                                           jnp.where(n_ev > E, Status.EVENT_OVERFLOW, st2.status)).astype(jnp.int32))

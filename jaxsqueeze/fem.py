@@ -15,6 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from jax.experimental import sparse as jsparse
+from threadpoolctl import threadpool_limits
 
 from .material import Material
 from .mesh import Mesh
@@ -187,13 +188,15 @@ def _sparse_build(mesh: Mesh, nu, pts, bdofs, pins, chunk: int = 128):
     keep[pins] = False
     D = sp.diags(keep.astype(float))
     Kp = (D @ K @ D + sp.diags((~keep).astype(float))).tocsc()
-    lu = spla.splu(Kp, permc_spec="MMD_AT_PLUS_A")
+    lu = spla.splu(Kp, permc_spec="COLAMD")
     G = np.empty((bdofs.size, bdofs.size))
-    for start in range(0, bdofs.size, chunk):
-        cols = np.arange(start, min(start + chunk, bdofs.size))
-        rhs = np.zeros((n2, cols.size))
-        rhs[bdofs[cols], np.arange(cols.size)] = keep[bdofs[cols]]
-        G[:, cols] = lu.solve(rhs)[bdofs]
+    # SuperLU's triangular solves are memory bound: extra BLAS threads only contend.
+    with threadpool_limits(1, "blas"):
+        for start in range(0, bdofs.size, chunk):
+            cols = np.arange(start, min(start + chunk, bdofs.size))
+            rhs = np.zeros((n2, cols.size))
+            rhs[bdofs[cols], np.arange(cols.size)] = keep[bdofs[cols]]
+            G[:, cols] = lu.solve(rhs)[bdofs]
     G = 0.5 * (G + G.T)
 
     def solve(f_b):

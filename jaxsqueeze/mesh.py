@@ -284,7 +284,13 @@ def read_mesh(path) -> Mesh:
     """
     import meshio
 
-    m = meshio.read(path)
+    try:
+        m = meshio.read(path)
+    except (OSError, meshio.ReadError):
+        raise
+    except Exception as exc:  # meshio fails obscurely on empty cell blocks
+        raise ValueError(f"could not read a triangle mesh from {path}: {exc!r}. A mesh file needs at least one "
+                         "triangle cell block with nodes.") from exc
     blocks = [c.data for c in m.cells if c.type == "triangle"]
     if not blocks:
         found = sorted({c.type for c in m.cells}) or ["no cells"]

@@ -37,8 +37,12 @@ def _title_state(res, row):
     return f"d = {float(res.depth[r]) * MM:.2f} mm ({100 * rel:.1f} %)"
 
 
+def _is_band(mesh) -> bool:
+    return len(np.asarray(mesh.triangles)) == 0
+
+
 def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=None, title=None,
-                  show_nodes=True, details=True, legend=True) -> Figure:
+                  show_nodes=True, details=True, legend=True, forces=None) -> Figure:
     """Deformed object, fingertips and contact modes at one recorded row (Fig. 4).
 
     Draws the undeformed outline (dashed), the deformed mesh (light triangles; the full
@@ -53,7 +57,13 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         ax: draw into an existing Axes (the Figure returned is its figure).
         details: with a new figure (no ``ax`` or ``zoom``), add two close-ups of the
             contact regions, one per finger, to the right of the whole object.
+        forces: draw each finger's total contact force as an arrow at its contact (black;
+            the longer arrow is a quarter of the object's size). Default: on for a band
+            (:class:`~jaxsqueeze.band.Band`, drawn as its deformed polyline through the
+            nodes), off for a mesh.
     """
+    if forces is None:
+        forces = _is_band(mesh)
     r = views._row(res, row)
     last = r == len(np.asarray(res.depth)) - 1
     if ax is None and zoom is None and details:
@@ -68,8 +78,9 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             away = C[f] - np.asarray(mesh.offset, float)
             away = away / max(np.linalg.norm(away), 1e-300)
             plot_deformed(res, mesh, r, displacement, zoom=(C[f] - away * float(res.radius), h), ax=sub,
-                          title=f"finger {f + 1} (close-up)", legend=False)
-        plot_deformed(res, mesh, r, displacement, ax=ax, title=title, show_nodes=show_nodes, legend="figure")
+                          title=f"finger {f + 1} (close-up)", legend=False, forces=forces)
+        plot_deformed(res, mesh, r, displacement, ax=ax, title=title, show_nodes=show_nodes, legend="figure",
+                      forces=forces)
         return fig
     if ax is None:
         fig = Figure(figsize=(8, 6.5), dpi=DPI, layout="constrained")
@@ -88,7 +99,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         q = np.vstack([q, q[:1]]) * MM
         ax.plot(q[:, 0], q[:, 1], "--", color="0.45", lw=1.0, zorder=1)
     # deformed mesh or boundary
-    if displacement is not None:
+    if displacement is not None and not _is_band(mesh):
         X = P + np.asarray(displacement, float)
         tri = Triangulation(X[:, 0] * MM, X[:, 1] * MM, np.asarray(mesh.triangles))
         ax.triplot(tri, color="0.75", lw=0.4, zorder=2)
@@ -134,7 +145,26 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
                     else 0.2 * float(zoom[1]) * MM
             ax.quiver(X_b[k, 0], X_b[k, 1], t[:, 0] * L, t[:, 1] * L, color=SLIP_COLOR, angles="xy",
                       scale_units="xy", scale=1, width=0.006, zorder=7)
+    if forces:
+        Fr = np.asarray(res.forces[r], float)
+        on = modes > FREE
+        tot = [Fr[on & (fg == f)].sum(axis=0) for f in (0, 1)]
+        big = max(max(np.linalg.norm(t) for t in tot), 1e-300)
+        scale = 0.25 * float(np.max(np.ptp(P, axis=0))) / big
+        for f in (0, 1):
+            k = np.flatnonzero(on & (fg == f))
+            if not k.size or not np.linalg.norm(tot[f]) > 0:
+                continue
+            at = X_b[k].mean(axis=0)
+            ax.quiver(at[0], at[1], tot[f][0] * scale * MM, tot[f][1] * scale * MM, color="black", angles="xy",
+                      scale_units="xy", scale=1, width=0.005, zorder=8)
+            if zoom is None:
+                ax.text(*(at + 0.5 * tot[f] * scale * MM), f" {np.linalg.norm(tot[f]):.3g} N", fontsize=8,
+                        va="bottom", zorder=8)
     handles, labels = ax.get_legend_handles_labels()
+    if forces:
+        handles.append(Line2D([], [], color="black", marker=r"$\rightarrow$", ls="", ms=12))
+        labels.append("contact force of each finger")
     handles += [Line2D([], [], ls="--", color="0.45"), Line2D([], [], color="0.15")]
     labels += ["undeformed outline", "deformed outline"]
     if legend == "figure":
@@ -290,7 +320,8 @@ def _cmap(k):
 
 
 def save_all(res, scene, outdir) -> dict:
-    """Write deformed.png, force_profile.png, sliding_profile.png and events.png to ``outdir``.
+    """Write deformed.png, force_profile.png, sliding_profile.png and events.png to ``outdir``
+    (for a band also cones.png, :func:`jaxsqueeze.cones.plot_cone_rotation`).
 
     Returns {name: path}.
     """
@@ -298,6 +329,10 @@ def save_all(res, scene, outdir) -> dict:
     mesh = scene.mesh
     figs = dict(deformed=plot_deformed(res, mesh), force_profile=plot_force_profile(res, mesh=mesh),
                 sliding_profile=plot_sliding_profile(res), events=plot_events(res))
+    if _is_band(mesh) and scene.friction_model == "coulomb":
+        from .cones import plot_cone_rotation
+
+        figs["cones"] = plot_cone_rotation(res, scene)      # Fig. 3: friction-cone rotation
     out = {}
     for name, fig in figs.items():
         path = os.path.join(outdir, f"{name}.png")

@@ -148,7 +148,7 @@ class Scene:
 
     # ------------------------------------------------------------------ object helpers
     def boundary_nodes(self) -> np.ndarray:
-        """(m,) node indices that can touch a finger."""
+        """(m,) node indices that can touch a finger (``arange(m)`` for a band)."""
         if isinstance(self.mesh, Mesh):
             return np.asarray(self.mesh.boundary)
         return np.arange(self.mesh.m)
@@ -166,24 +166,46 @@ _CACHE: dict = {}
 
 
 def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance:
-    """Cached compliance operator of a mesh or band (E and thickness only rescale it)."""
+    """Cached compliance operator of a mesh or band (E and thickness only rescale it).
+
+    A band (:class:`~jaxsqueeze.band.Band`) is built once per band object: its scaled
+    compliance ``E h T K^+ T^T`` does not depend on E (nor on nu, which a band does not
+    have), so ``method`` and ``material.nu`` are ignored and the stiffness scale is
+    ``material.E * band.height``. The band's out-of-plane extent is ``band.height``;
+    ``material.thickness`` must equal it (raises ``ValueError`` otherwise, rather than
+    silently using one of two different values).
+    """
     from .fem import compliance
 
     solid = isinstance(obj, Mesh)
-    key = (id(obj), float(material.nu), method if solid else "band")
+    if not solid:
+        from .band import Band
+
+        if not isinstance(obj, Band):
+            raise TypeError(f"Scene.mesh must be a jaxsqueeze Mesh or Band, got {type(obj).__name__}")
+        if _concrete(material.thickness) and not np.allclose(np.asarray(material.thickness, float), obj.height,
+                                                             rtol=1e-9, atol=0.0):
+            raise ValueError(f"Material.thickness={material.thickness!r} differs from the band height "
+                             f"{obj.height!r} m; for a band both are its out-of-plane extent h "
+                             "(use Material(E, nu, thickness=band.height)).")
+    key = (id(obj), float(material.nu) if solid else None, method if solid else "band")
     hit = _CACHE.get(key)
     if hit is None or hit[0] is not obj:
         if solid:
             op = compliance(obj, material, method)
         else:
             from .band import band_compliance
-            op = band_compliance(obj, material)
+            op = band_compliance(obj, 1.0)      # scaled G is independent of E
         _CACHE[key] = hit = (obj, op)
     op = hit[1]
-    return dataclasses.replace(op, stiffness=jax.numpy.asarray(material.E * material.thickness, op.G.dtype))
+    h = material.thickness if solid else obj.height
+    return dataclasses.replace(op, stiffness=jax.numpy.asarray(material.E * h, op.G.dtype))
 
 
 def nearest_boundary_node(obj, xy) -> int:
+    """Boundary node of a mesh or band nearest to ``xy`` (2,) in the caller's frame [m]
+    (``points + offset``; both :class:`Mesh` and :class:`~jaxsqueeze.band.Band` keep the node
+    centroid at the origin and the caller's frame in ``offset``)."""
     xy = np.asarray(xy, float)
     if isinstance(obj, Mesh):
         pts, nodes = obj.points[obj.boundary] + obj.offset, np.asarray(obj.boundary)

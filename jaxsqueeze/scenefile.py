@@ -17,6 +17,19 @@ optional is required; unknown keys, at any level, are errors)::
     # mesh_file = "part.msh"       # instead of `shape`: any meshio format with triangles,
                                    #   path relative to this TOML file; z must be 0
 
+    # --- or a band (ring-like object, Section V-A; jaxsqueeze.band) instead of shape/mesh_file:
+    # band = "heart"               # heart | leaf | circle (jaxsqueeze.curves)
+    # size = 0.08                  #   heart: width; leaf: length (its width is size/2, tip
+                                   #   radius size/40); circle: diameter [m]
+    # nodes = 128                  #   number of band nodes m (equal arc-length spacing)
+    # width = 0.0005               #   optional: wall thickness in the plane w [m] (default 0.5 mm)
+    # height = 0.005               #   optional: band height out of the plane h [m] (default
+                                   #   material.thickness if given, else 5 mm)
+    # A band's frame is its curve's: the heart and leaf are centred on their bounding box, the
+    # circle on the origin; grip.points are in that frame. For a band, material.nu is ignored
+    # (optional) and material.thickness is optional (it must equal object.height if both are
+    # given); squeeze.contact defaults to "point"; --max-edge / --refine-edge do not apply.
+
     [material]
     E = 1.0e5                      # Young's modulus [Pa] > 0
     nu = 0.3                       # Poisson's ratio, -1 < nu <= 0.5
@@ -33,10 +46,12 @@ optional is required; unknown keys, at any level, are errors)::
     # nodes = [12, 57]             # or: mesh node indices on the boundary
 
     [squeeze]
-    depth = 0.015                  # target squeeze depth [m] > 0
+    depth = 0.015                  # target squeeze depth [m] > 0; or instead:
+    # relative_depth = 0.10        #   depth as a fraction rho of the initial grip distance
+                                   #   (the paper's rho, Section V-A), 0 < rho < 1
     friction = 0.5                 # optional, Coulomb mu >= 0 (default 0.5)
     friction_model = "coulomb"     # optional: coulomb | frictionless | stick
-    contact = "segment"            # optional: segment | point
+    contact = "segment"            # optional: segment | point (default: point for a band)
     method = "sparse"              # optional: sparse | dense | spectral
 
     [accuracy]                     # optional table; every key optional (see jaxsqueeze.Settings)
@@ -70,6 +85,8 @@ from typing import Any
 
 import numpy as np
 
+from .engine import CONE_SLACK
+
 try:  # Python >= 3.11
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
@@ -82,6 +99,8 @@ SHAPES = {
     "annulus": ("r_outer", "r_inner"),
     "polygon": ("vertices",),
 }
+BANDS = ("heart", "leaf", "circle")
+BAND_KEYS = {"band": True, "size": True, "nodes": True, "width": False, "height": False}
 SHAPE_OPTIONAL = {"rectangle": ("center",), "disk": ("center",), "ellipse": ("center",),
                   "annulus": ("center",), "polygon": ("holes",)}
 MESH_KEYS = ("max_edge", "refine_edge", "refine_radius")
@@ -90,7 +109,7 @@ TABLES = {
     "material": {"E": True, "nu": True, "thickness": True},
     "fingers": {"radius": True, "rotation": False},
     "grip": {"nodes": False, "points": False},
-    "squeeze": {"depth": True, "friction": False, "friction_model": False, "contact": False, "method": False},
+    "squeeze": {"depth": False, "relative_depth": False, "friction": False, "friction_model": False, "contact": False, "method": False},
     "accuracy": {"step": False, "event_tol": False, "newton_tol": False, "gap_tol": False, "capacity": False,
                  "max_steps": False, "max_events": False, "newton_iters": False, "bisect_iters": False,
                  "precision": False},
@@ -245,13 +264,18 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     title = data.get("title", os.path.splitext(os.path.basename(path))[0])
     if not isinstance(title, str):
         raise SceneFileError("title", f"expected a string, got {_describe(title)}")
+    is_band = isinstance(data["object"], dict) and "band" in data["object"]
     for t, keys in TABLES.items():
         if keys is None or t not in data:
             continue
         _unknown(t, data[t], set(keys))
         for k, required in keys.items():
+            if is_band and t == "material" and k in ("nu", "thickness"):
+                continue                      # a band has no nu; its height may come from [object]
             if required and k not in data[t]:
                 raise SceneFileError(f"{t}.{k}", "missing (required)")
+    if ("depth" in data["squeeze"]) == ("relative_depth" in data["squeeze"]):
+        raise SceneFileError("squeeze.depth", "give exactly one of squeeze.depth [m] or squeeze.relative_depth")
 
     # accuracy (first: it holds the precision)
     acc = data.get("accuracy", {})
@@ -269,8 +293,21 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     # material
     mat_t = data["material"]
     E = _number("material.E", mat_t["E"])
-    nu = _number("material.nu", mat_t["nu"])
-    th = _number("material.thickness", mat_t["thickness"])
+    nu = _number("material.nu", mat_t.get("nu", 0.3))         # a band ignores nu
+    band_height = None
+    if is_band:
+        obj_t = data["object"]
+        band_height = _number("object.height", obj_t["height"], positive=True) if "height" in obj_t else None
+        if "thickness" in mat_t:
+            th = _number("material.thickness", mat_t["thickness"])
+            if band_height is not None and not math.isclose(th, band_height, rel_tol=1e-9):
+                raise SceneFileError("material.thickness", f"{th} m differs from object.height = {band_height} m; "
+                                     "for a band both are its height out of the plane (give one of them)")
+            band_height = th if band_height is None else band_height
+        band_height = 5e-3 if band_height is None else band_height
+        th = band_height
+    else:
+        th = _number("material.thickness", mat_t["thickness"])
     try:
         material = Material(E=E, nu=nu, thickness=th)
     except ValueError as e:
@@ -305,7 +342,10 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
             raise SceneFileError("grip.nodes", f"expected two integer mesh node indices [i, j], got {_describe(g)}")
         grip_nodes = g
 
-    mesh = _object(data["object"], base, grip_points, (max_edge, refine_edge))
+    if is_band:
+        mesh = _band(data["object"], band_height, (max_edge, refine_edge))
+    else:
+        mesh = _object(data["object"], base, grip_points, (max_edge, refine_edge))
 
     # grip → nodes
     from .scene import nearest_boundary_node
@@ -322,10 +362,16 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
 
     # squeeze
     sq = data["squeeze"]
-    depth = _number("squeeze.depth", sq["depth"])
+    if "relative_depth" in sq:
+        rho = _number("squeeze.relative_depth", sq["relative_depth"], positive=True)
+        if rho >= 1:
+            raise SceneFileError("squeeze.relative_depth", f"expected a fraction 0 < rho < 1 of the grip distance, got {rho}")
+        dkey, depth = "squeeze.relative_depth", rho * _grip_distance(mesh, grip)
+    else:
+        dkey, depth = "squeeze.depth", _number("squeeze.depth", sq["depth"])
     friction = _number("squeeze.friction", sq.get("friction", 0.5))
     fmodel = _choice("squeeze.friction_model", sq.get("friction_model", "coulomb"), ("coulomb", "frictionless", "stick"))
-    contact = _choice("squeeze.contact", sq.get("contact", "segment"), ("segment", "point"))
+    contact = _choice("squeeze.contact", sq.get("contact", "point" if is_band else "segment"), ("segment", "point"))
     method = _choice("squeeze.method", sq.get("method", "sparse"), METHODS)
     try:
         scene = Scene(mesh=mesh, material=material, fingers=fingers, grip=grip, friction=friction, depth=depth,
@@ -334,12 +380,12 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
         m = re.search(r"Settings\.(\w+)", str(e))
         if m:
             raise SceneFileError(f"accuracy.{m.group(1)}", str(e)) from None
-        raise _wrap(e, "squeeze", {r"^friction=": "squeeze.friction", r"^depth=": "squeeze.depth",
+        raise _wrap(e, "squeeze", {r"^friction=": "squeeze.friction", r"^depth=": dkey,
                                    r"^friction_model=": "squeeze.friction_model",
                                    r"^contact=": "squeeze.contact", r"^grip": gkey}) from None
     _check_cones(scene, gkey)
     if depth >= _grip_distance(mesh, grip):
-        raise SceneFileError("squeeze.depth", f"depth {depth} m is not smaller than the distance between the grip "
+        raise SceneFileError(dkey, f"depth {depth} m is not smaller than the distance between the grip "
                              f"nodes ({_grip_distance(mesh, grip):.6g} m)")
     return SceneSpec(scene=scene, precision=precision, title=title, path=str(path), data=data)
 
@@ -360,12 +406,40 @@ def _check_cones(scene, key):
     seg = seg / np.linalg.norm(seg)
     ang = np.degrees(np.arccos(np.clip([-N[pos[i]] @ seg, N[pos[j]] @ seg], -1, 1)))
     half = np.degrees(np.arctan(float(scene.friction))) if scene.friction_model == "coulomb" else 0.0
-    if np.any(ang > half + 1e-6):
+    if np.any(ang > half + np.degrees(CONE_SLACK)):
         raise SceneFileError(key, (
             f"grip nodes ({i}, {j}): the segment between them makes {ang[0]:.3g}° and {ang[1]:.3g}° with the "
             f"inward normals, but the friction cones only allow {half:.3g}° (squeeze.friction = "
             f"{float(scene.friction):.3g}, friction_model = {scene.friction_model!r}); choose more nearly "
             "opposite grip points or more friction"))
+
+
+def _band(obj, height, overrides=(None, None)):
+    """A :class:`~jaxsqueeze.band.Band` from an ``[object]`` table with ``band = ...``."""
+    from . import curves
+    from .band import Band
+
+    _unknown("object", obj, set(BAND_KEYS))
+    for k, required in BAND_KEYS.items():
+        if required and k not in obj:
+            raise SceneFileError(f"object.{k}", "missing (required for a band)")
+    for opt, v in zip(("--max-edge", "--refine-edge"), overrides):
+        if v is not None:
+            raise SceneFileError(opt, "this scene is a band (object.band); mesh sizes apply to built-in "
+                                 "shapes only (a band's resolution is object.nodes)")
+    kind = _choice("object.band", obj["band"], BANDS)
+    size = _number("object.size", obj["size"], positive=True)
+    m = _number("object.nodes", obj["nodes"], integer=True)
+    if m < 8:
+        raise SceneFileError("object.nodes", f"a band needs at least 8 nodes, got {m}")
+    width = _number("object.width", obj["width"], positive=True) if "width" in obj else 0.5e-3
+    try:
+        curve = {"heart": lambda: curves.heart(size), "leaf": lambda: curves.leaf(size, size / 2, size / 40),
+                 "circle": lambda: curves.circle(size / 2)}[kind]()
+        return Band.from_function(curve, m, width=width, height=height)
+    except ValueError as e:
+        raise _wrap(e, "object", {r"width": "object.width", r"height": "object.height",
+                                  r"size|radius|length": "object.size", r"nodes|\bm\b": "object.nodes"}) from None
 
 
 def _object(obj, base, grip_points, overrides=(None, None)):
@@ -375,7 +449,8 @@ def _object(obj, base, grip_points, overrides=(None, None)):
     obj = _table("object", obj)
     has_shape, has_file = "shape" in obj, "mesh_file" in obj
     if has_shape == has_file:
-        raise SceneFileError("object", "give exactly one of object.shape (a built-in shape) or object.mesh_file")
+        raise SceneFileError("object", "give exactly one of object.shape (a built-in shape), object.mesh_file "
+                             "or object.band")
     if has_file:
         _unknown("object", obj, {"mesh_file"})
         for opt, v in zip(("--max-edge", "--refine-edge"), overrides):
