@@ -30,8 +30,7 @@ from .status import Status
 FREE, STICK, SLIP_POS, SLIP_NEG = 0, 1, 2, 3   # per-node modes; SLIP_POS slides toward larger θ
 EVENT_KINDS = "ABCD"                          # new contact, break, stick→slip, slip→stick
 RUNNING = -1
-CONE_SLACK = 1e-4   # [rad] an initial contact this close to its cone edge counts as inside
-NEUTRAL_RTOL = 1e-3   # frictionless: singular directions below this fraction count as neutral
+CONE_SLACK = 1e-7   # [rad] a force this close to its cone edge counts as inside (round-off)
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -171,9 +170,9 @@ def _lin_solve(model: Model, J, r):
     if model.cfg.friction_model == "frictionless":
         # Neutral modes (docs/numerics.md): a frictionless object between round tips can spin
         # or drift sideways at (almost) no cost. A truncated pseudo-inverse leaves every
-        # direction the contacts resist less than NEUTRAL_RTOL of the stiffest one where it
-        # is, so such a mode stays unexcited instead of swinging.
-        return linalg.gauss_jordan(J, r, rtol=NEUTRAL_RTOL)
+        # direction the contacts resist less than linalg.NEUTRAL_RTOL of the stiffest one
+        # where it is, so such a mode stays unexcited instead of swinging.
+        return linalg.lstsq(J, r)
     return linalg.solve(J, r)
 
 
@@ -255,13 +254,17 @@ def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
         eA = jnp.full_like(eA, jnp.inf)
 
     # events B, C, D at the contact slots
-    world = th + model.angles(d)[c.finger]
-    fn = jnp.sum(f * unit(world), -1)
-    ft = cross2(unit(world), f)     # f · t with t = (−sin, cos)
+    axis = unit(th + model.angles(d)[c.finger])    # cone axis: from the tip centre to the node
+    if model.cfg.contact == "point":
+        # a point contact (Section V-A) has the object's own deformed surface normal as its cone
+        # axis: it turns as the band bends (Fig. 3), while the node stays put on the tip
+        axis = -surface_normals(op, x)[c.idx]
+    fn = jnp.sum(f * axis, -1)
+    ft = cross2(axis, f)            # f · t, t the axis turned by +90°
     stick = c.mode == STICK
     rate = jnp.zeros_like(th)
     if model.cfg.slip_events:
-        margin = model.mu * fn - jnp.abs(ft)
+        margin = cone_margin(model, fn, ft)
         rate = jnp.where(c.mode == SLIP_POS, 1.0, jnp.where(c.mode == SLIP_NEG, -1.0, 0.0)) * slip_rates(model, c, th, d)
         other = jnp.where(stick, margin, jnp.where(c.armed, rate, jnp.inf))
         e_slot = jnp.minimum(fn, other)
@@ -354,12 +357,44 @@ def _new_contacts(model: Model, st: State, sol: Solution, kind, d, flag):
     return mode.astype(jnp.int32), finger.astype(jnp.int32), theta, added
 
 
-def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols, slack=0.0):
+def surface_normals(op: Compliance, x):
+    """(m, 2) outward unit normals of the boundary polygon through the positions ``x`` (m, 2).
+
+    Each loop runs with the material on its left, so the outward normal of the chord from the
+    previous to the next node is that chord turned by −90°.
+    """
+    prev, nxt = _neighbours(op.loops, op.m)
+    t = x[nxt] - x[prev]
+    n = jnp.stack([t[:, 1], -t[:, 0]], axis=1)
+    return n / jnp.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _neighbours(loops, m):
+    loops = loops or (m,)
+    prev, nxt, start = [], [], 0
+    for size in loops:
+        k = np.arange(size)
+        prev.append(start + (k - 1) % size)
+        nxt.append(start + (k + 1) % size)
+        start += size
+    return np.concatenate(prev), np.concatenate(nxt)
+
+
+def cone_margin(model: Model, fn, ft):
+    """|f| sin(φ + slack − ψ), ψ the force's angle from the contact normal: > 0 inside the cone.
+
+    Written with sines and cosines so that μ → ∞ (φ → π/2) stays finite; the slack
+    ``CONE_SLACK`` absorbs round-off, the same slack the grip check allows.
+    """
+    a = model.phi + CONE_SLACK
+    return jnp.sin(a) * fn - jnp.cos(a) * jnp.abs(ft)
+
+
+def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols):
     """New contacts stick first; one whose force leaves the cone (or pulls) is changed.
 
-    ``slack`` [rad] widens the cone for this test (the initial contacts get ``CONE_SLACK``,
-    as the grip check does). A contact that found no slot (overflow) is left alone: the
-    caller reports ``Status.OVERFLOW``.
+    A contact that found no slot (overflow) is left alone: the caller reports
+    ``Status.OVERFLOW``.
     """
     c = pack(model, mode, finger, theta)
     sol = solve_at(model, c, mode, d + eta, tols)
@@ -367,7 +402,7 @@ def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols, sla
     pull = added & slotted & (sol.fn <= 0)
     mode = jnp.where(pull, FREE, mode)
     if model.cfg.slip_events:
-        out = added & slotted & ~pull & (jnp.tan(model.phi + slack) * sol.fn < jnp.abs(sol.ft))
+        out = added & slotted & ~pull & (cone_margin(model, sol.fn, sol.ft) < 0)
         mode = jnp.where(out, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
     return mode.astype(jnp.int32)
 
@@ -397,7 +432,7 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
     ang = lambda k, f: jnp.arctan2(*(P[k] - C0[f])[::-1]) - a0[f]  # noqa: E731
     theta = jnp.zeros(m, dt).at[i].set(ang(i, 0)).at[j].set(ang(j, 1))
     added = jnp.zeros(m, bool).at[i].set(True).at[j].set(True)
-    mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt), eta, tols, CONE_SLACK) \
+    mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt), eta, tols) \
         if cfg.slip_events else mode
 
     # the segment between the initial contacts must lie inside both friction cones

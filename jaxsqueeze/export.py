@@ -91,7 +91,7 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
 
     os.makedirs(path_dir, exist_ok=True)
     path = os.path.join(path_dir, f"{name}.xdmf")
-    cells = [meshio.CellBlock("triangle", np.asarray(mesh.triangles, np.int64))]
+    cells = [_cells(mesh)]
     cwd = os.getcwd()
     # meshio names the .h5 file after the .xdmf path; write from inside the folder so the
     # reference in the .xdmf is relative and the pair can be moved together.
@@ -114,6 +114,16 @@ def write_final_vtu(path, res, mesh) -> str:
     d = os.path.dirname(os.path.abspath(path))
     os.makedirs(d, exist_ok=True)
     data = row_point_data(res, mesh, -1)
-    meshio.write(path, meshio.Mesh(_points3(mesh), [("triangle", np.asarray(mesh.triangles, np.int64))],
+    meshio.write(path, meshio.Mesh(_points3(mesh), [_cells(mesh)],
                                    point_data=data))
     return str(path)
+
+
+def _cells(mesh) -> "meshio.CellBlock":
+    """Triangles of a solid mesh, or the closed polyline ("line" cells) of a band."""
+    import meshio
+
+    tri = np.asarray(mesh.triangles, np.int64)
+    if len(tri):
+        return meshio.CellBlock("triangle", tri)
+    return meshio.CellBlock("line", np.asarray(mesh.segments(), np.int64))

@@ -154,8 +154,7 @@ def _matrix_field(Gnb: np.ndarray, pts: np.ndarray) -> FieldMap:
 def _dense_K(pts, triangles, nu):
     n2 = 2 * pts.shape[0]
     ke = element_matrices(pts, triangles, nu)
-    dofs = jnp.asarray(element_dofs(triangles)) if not isinstance(triangles, jax.core.Tracer) else \
-        jnp.stack([2 * triangles, 2 * triangles + 1], axis=2).reshape(-1, 6)
+    dofs = jnp.stack([2 * triangles, 2 * triangles + 1], axis=2).reshape(-1, 6)
     return jnp.zeros((n2, n2), ke.dtype).at[dofs[:, :, None], dofs[:, None, :]].add(ke)
 
 

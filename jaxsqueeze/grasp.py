@@ -10,13 +10,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .engine import CONE_SLACK, Config, Grasp, simulate
+from .engine import CONE_SLACK, Config, Grasp, simulate  # noqa: F401  (simulate: the jittable core)
 from .material import _concrete
 from .operator import Compliance, field_displacement
 from .scene import Scene
 from .status import Status
 
-FREE, STICK, SLIP_POS, SLIP_NEG = 0, 1, 2, 3
 
 
 class EventLog(NamedTuple):

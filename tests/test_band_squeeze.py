@@ -265,3 +265,17 @@ def test_band_agrees_with_solid_ring():
     assert abs(err[0]) <= 0.01 and abs(err[1]) <= 0.02 and abs(err[2]) <= 0.06
     assert np.all(np.diff(np.abs(err)) > 0)                 # thinner walls agree better
     assert abs(err[-1]) > 0.05                              # and a thick wall visibly does not
+
+
+def test_point_contact_fails_when_its_turning_cone_reaches_the_force(runs):
+    """Section V-A: a point contact's cone turns with the band's surface. With μ so small that
+    the heart's breaking cones (≈ 8° of turn by 10 %) reach the fixed force line earlier, the
+    squeeze ends in SLIP_FAILURE before the target depth; with the paper's μ = 0.26 it holds."""
+    scene, res = runs["heart"]
+    assert res.outcome == jsq.Status.SUCCESS
+    start = float(np.min(cones.grasp_stability(res, scene).margin[0]))   # initial angle to the cone edge [rad]
+    weak = scene.replace(friction=float(np.tan(np.arctan(scene.friction) - start + np.radians(4.0))))
+    failed = jsq.squeeze(weak)
+    assert failed.outcome == jsq.Status.SLIP_FAILURE
+    assert 0 < failed.final_depth < res.final_depth
+    assert [k for _, _, k, _ in failed.events.rows()][-1] == "C"

@@ -218,3 +218,39 @@ def test_second_call_does_not_recompile(slanted):
     before = grasp_mod._run._cache_size()
     jsq.squeeze(slanted.replace(friction=0.4, depth=0.01, fingers=jsq.Fingers(radius=0.02)))
     assert grasp_mod._run._cache_size() == before
+
+
+def _primitives(scene):
+    """Counter of the primitives in the compiled squeeze's program (all nested jaxprs)."""
+    import collections
+    import dataclasses
+
+    op = dataclasses.replace(scene.operator(), field=None)
+    closed = jax.make_jaxpr(lambda g: grasp_mod.simulate(op, g, grasp_mod.config_of(scene)))(
+        grasp_mod.grasp_of(scene, op))
+    count = collections.Counter()
+
+    def walk(jaxpr):
+        for eqn in jaxpr.eqns:
+            count[eqn.primitive.name] += 1
+            for value in eqn.params.values():
+                for sub in value if isinstance(value, (list, tuple)) else [value]:
+                    inner = getattr(sub, "jaxpr", sub)
+                    if hasattr(inner, "eqns"):
+                        walk(inner)
+
+    walk(closed.jaxpr)
+    return count
+
+
+def test_effects_compile_only_what_the_scene_needs(centred):
+    """DESIGN 2.7: full stick has no Newton solve (custom_root) and no slip events; without a
+    rotation schedule there is no rotation code."""
+    coulomb = _primitives(centred)
+    stick = _primitives(centred.replace(friction_model="stick"))
+    rotating = _primitives(centred.replace(fingers=jsq.Fingers(radius=0.015, rotation=[[0.0, 0.0], [1.0, 0.0]])))
+    # Newton's while loops (slip angles, inside every configuration solve) are absent: only the
+    # squeeze loop and the event location loop remain
+    assert stick["while"] == 2 and coulomb["while"] > 2
+    assert sum(stick.values()) < 0.5 * sum(coulomb.values())
+    assert sum(rotating.values()) > sum(coulomb.values())
