@@ -14,7 +14,6 @@ own program. Columns as in ``squeeze.py`` (``compile_s`` = first call - best war
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import sys
 
@@ -42,7 +41,7 @@ def main(argv=None):
     import jax
     jax.config.update("jax_enable_x64", True)
     import jaxsqueeze as jsq
-    from squeeze import foam, machine, measure
+    from squeeze import foam, machine, measure, write_csv
 
     info = machine()
     print(info, flush=True)
@@ -57,15 +56,9 @@ def main(argv=None):
             rows.append(r)
             print(r, flush=True)
     os.makedirs(a.out, exist_ok=True)
-    path = os.path.join(a.out, "effects.csv")
     cols = ["friction_model", "rotation", "nodes", "boundary", "first_s", "compile_s", "warm_s", "core_s",
             "core_median_s", "rows", "events", "step_ms", "outcome", "F2y_N", "load_first", "load_core"]
-    with open(path, "w", newline="") as f:
-        f.write(f"# {info}\n")
-        w = csv.DictWriter(f, cols, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    print(f"wrote {path}")
+    write_csv(os.path.join(a.out, "effects.csv"), rows, cols, info)
     ref = {r["rotation"]: r for r in rows if r["friction_model"] == "coulomb"}
     print("\n| friction model | rotation | compile [s] | core [s] | rows | events | per row [ms] | "
           "core vs coulomb | F2y [N] | load |")

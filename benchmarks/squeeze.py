@@ -148,6 +148,17 @@ COLS = ["series", "method", "nodes", "boundary", "interior_edge_mm", "build_s", 
         "load_warm", "load_core"]
 
 
+def write_csv(path, rows, cols, info):
+    """One CSV per benchmark: a comment line with the machine, then the rows."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w", newline="") as f:
+        f.write(f"# {info}\n")
+        w = csv.DictWriter(f, cols, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    print(f"wrote {path}")
+
+
 def fmt(v, nd=3):
     if isinstance(v, float):
         return f"{v:.{nd}f}" if abs(v) < 1e4 else f"{v:.0f}"
@@ -192,14 +203,7 @@ def main(argv=None):
         sc = base.replace(mesh=mesh, grip=grip_of(mesh))
         run("interior", sc, dict(interior_edge_mm=1e3 * h))
 
-    os.makedirs(a.out, exist_ok=True)
-    path = os.path.join(a.out, "squeeze.csv")
-    with open(path, "w", newline="") as f:
-        f.write(f"# {info}\n")
-        w = csv.DictWriter(f, COLS, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    print(f"wrote {path}")
+    write_csv(os.path.join(a.out, "squeeze.csv"), rows, COLS, info)
     plot(rows, os.path.join(a.out, "squeeze.png"), info)
     report(rows)
 

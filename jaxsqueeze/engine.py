@@ -531,9 +531,12 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
         if not (cfg.slip_events or cfg.friction_model == "frictionless"):
             overflow = jnp.sum(mode > FREE) > S
         st2 = _finish(st2, s2.ok & s_star.ok)
-        st2 = _with(st2, status=jnp.where(overflow, Status.OVERFLOW,
-                                          jnp.where(n_ev > E, Status.EVENT_OVERFLOW, st2.status)).astype(jnp.int32))
-        return st2
+        # an event that undid itself at the depth it started from (a new contact that pulls at
+        # once) would repeat forever: stop with a status instead
+        stalled = jnp.all(mode == st.mode) & (d_star <= d0)
+        status = jnp.where(overflow, Status.OVERFLOW, jnp.where(n_ev > E, Status.EVENT_OVERFLOW,
+                           jnp.where(stalled & (st2.status == RUNNING), Status.STALLED, st2.status)))
+        return _with(st2, status=status.astype(jnp.int32))
 
     def _finish(st, ok):
         it = st.it + 1

@@ -140,7 +140,9 @@ def grasp_of(scene: Scene, op: Compliance) -> Grasp:
 
 @partial(jax.jit, static_argnames=("cfg",))
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
-    return simulate(op, grasp, cfg)
+    """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
+    st = simulate(op, grasp, cfg)
+    return to_result(st, op, grasp.radius), st.F.reshape(-1), st.g
 
 
 def squeeze(scene: Scene) -> SqueezeResult:
@@ -156,8 +158,12 @@ def squeeze(scene: Scene) -> SqueezeResult:
     if _concrete(scene.grip) and _concrete(scene.friction):
         check_grip(scene, op)
     cfg = config_of(scene)
-    st = _run(dataclasses.replace(op, field=None), grasp_of(scene, op), cfg)
-    return to_result(st, op, scene)
+    res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp_of(scene, op), cfg)
+    if op.field is not None:
+        res = dataclasses.replace(res, displacement=field_displacement(op, F_hat, g_hat) * op.length)
+    if _concrete(res.count) and np.ndim(res.count) == 0:
+        res = trim(res)
+    return res
 
 
 def check_grip(scene: Scene, op: Compliance) -> None:
@@ -179,8 +185,9 @@ def check_grip(scene: Scene, op: Compliance) -> None:
             "opposite nodes (e.g. Scene.nearest_boundary_node) or raise the friction.")
 
 
-def to_result(st, op: Compliance, scene: Scene | None = None) -> SqueezeResult:
-    """Convert the engine's final state (scaled) into a :class:`SqueezeResult` (SI)."""
+def to_result(st, op: Compliance, radius) -> SqueezeResult:
+    """Convert the engine's final state (scaled) into a :class:`SqueezeResult` (SI), padded
+    with the last valid row; the full displacement field is left to the caller (None)."""
     L, Fs = op.length, op.force_scale
     depth, mode, finger, theta, F, u, C, alpha = st.hist
     k = st.count
@@ -188,23 +195,18 @@ def to_result(st, op: Compliance, scene: Scene | None = None) -> SqueezeResult:
     last = jnp.minimum(rows, k - 1)                  # pad with the last valid row
     pad = lambda a: a[last]  # noqa: E731
     ev_d, ev_n, ev_k, ev_f = st.events
-    disp = None
-    if op.field is not None:
-        Ff = st.F.reshape(-1)
-        disp = field_displacement(op, Ff, st.g) * L
-    res = SqueezeResult(
+    return SqueezeResult(
         status=st.status, depth=pad(depth) * L, modes=pad(mode), finger=pad(finger), theta=pad(theta),
         forces=pad(F) * Fs, boundary_displacement=pad(u) * L, centres=pad(C) * L, alpha=pad(alpha),
-        events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=disp,
+        events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
         g=st.g * jnp.array([L, L, 1.0], st.g.dtype), count=k, n_events=st.n_ev, nodes=op.nodes,
-        radius=jnp.asarray(scene.fingers.radius if scene is not None else jnp.nan))
-    if _concrete(k) and np.ndim(k) == 0:
-        res = trim(res)
-    return res
+        radius=radius)
 
 
 def trim(res: SqueezeResult) -> SqueezeResult:
-    """Drop the padding rows of an unbatched result."""
+    """Drop the padding rows of an unbatched result (as numpy arrays: slicing JAX arrays to a
+    new length would compile a small program per length)."""
+    res = jax.tree.map(np.asarray, res)
     k, e = int(res.count), min(int(res.n_events), len(res.events))
     hist = {f: getattr(res, f)[:k] for f in ("depth", "modes", "finger", "theta", "forces",
                                               "boundary_displacement", "centres", "alpha")}

@@ -566,3 +566,22 @@ def test_cli_good_mesh_file_scene_loads(tmp_path):
     (tmp_path / "s.toml").write_text(CLI_SCENE)
     spec = scenefile.load(tmp_path / "s.toml")
     assert spec.scene.mesh.n == 5
+
+
+def test_unresolvable_contact_stops_with_stalled():
+    """The foam square gripped frictionlessly near a corner (bottom/top nodes at x ≈ -38 mm):
+    at 7.3 mm a node enters finger 1 but, made a contact, would pull (the frictionless neutral
+    modes, docs/numerics.md). The squeeze stops at once with STALLED and advice, never loops."""
+    from jaxsqueeze import scenefile
+
+    scene = scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", "foam_square.toml")).scene
+    b = np.asarray(scene.mesh.boundary)
+    P = scene.mesh.points[b] + scene.mesh.offset
+    bot, top = b[np.abs(P[:, 1] + 0.05) < 1e-9], b[np.abs(P[:, 1] - 0.05) < 1e-9]
+    xb, xt = scene.mesh.points[bot, 0], scene.mesh.points[top, 0]
+    gap = np.abs(xb[:, None] - xt[None]) + 1e-3 * np.abs(xb[:, None] + scene.mesh.offset[0])
+    i, j = np.unravel_index(np.argmin(gap), gap.shape)
+    res = jsq.squeeze(scene.replace(grip=(int(bot[i]), int(top[j])), friction_model="frictionless"))
+    assert res.outcome == jsq.Status.STALLED, res.outcome.name
+    assert int(res.n_events) <= 3 and 0 < res.final_depth < scene.depth
+    assert "Refine the mesh" in res.outcome.advice
