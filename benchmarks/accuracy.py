@@ -104,7 +104,6 @@ def main(argv=None):
     info = machine()
     print(info, flush=True)
     base = foam()
-    S = base.settings
     rows = []
 
     def series(knob, values, make, events=True, label=str):
@@ -159,6 +158,7 @@ def plot(rows, path, info):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker  # noqa: F401
     knobs = list(dict.fromkeys(r["knob"] for r in rows))
     fig, axs = plt.subplots(2, 3, figsize=(13, 7.5), dpi=80)
     floor = 1e-16
@@ -178,7 +178,8 @@ def plot(rows, path, info):
         ax.set_xlabel("time [s]" + (" (build + squeeze)" if knob in ("mesh", "build") else " (squeeze)"))
         ax.set_ylabel("error")
         ax.grid(True, which="both", alpha=0.3)
-    axs.flat[0].legend(fontsize=7)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())   # no overlapping labels
+        ax.legend(fontsize=7, loc="best")
     for ax in list(axs.flat)[len(knobs):]:
         ax.axis("off")
     fig.suptitle(f"foam square 15 % squeeze: error vs time per knob (floor 1e-16) — {info}", fontsize=8)

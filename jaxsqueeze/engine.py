@@ -6,8 +6,8 @@ friction-cone edge. Each step solves the *total* equations from the undeformed s
 current contact configuration (DESIGN 2.1): prescribed positions of the contact nodes on the
 fingertip circles, the bordered system (eq. 4) for the forces, and Newton on the slip angles
 (system S, eq. 6) with ``jax.jacobian``. Signed event functions detect events A–D; the
-earliest crossing is bracketed by bisection and refined by one implicit-function step, so the
-event depth carries its derivative.
+earliest crossing is bracketed (Illinois regula falsi, safeguarded by bisection) and refined by
+one implicit-function step, so the event depth carries its derivative.
 
 Units inside are scaled (DESIGN 2.3): lengths / L, forces / (E h L).
 """
@@ -24,7 +24,7 @@ from jax import lax
 
 from . import linalg
 from .bordered import bordered_matrix, slot_dofs
-from .operator import Compliance, field_displacement
+from .operator import Compliance
 from .status import Status
 
 FREE, STICK, SLIP_POS, SLIP_NEG = 0, 1, 2, 3   # per-node modes; SLIP_POS slides toward larger θ

@@ -119,7 +119,7 @@ def write_final_vtu(path, res, mesh) -> str:
     return str(path)
 
 
-def _cells(mesh) -> "meshio.CellBlock":
+def _cells(mesh):
     """Triangles of a solid mesh, or the closed polyline ("line" cells) of a band."""
     import meshio
 

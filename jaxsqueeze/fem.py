@@ -7,7 +7,6 @@ rigid modes and the compliance O(1) (DESIGN 2.3).
 """
 from __future__ import annotations
 
-from functools import partial
 
 import jax
 import jax.numpy as jnp

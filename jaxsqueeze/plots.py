@@ -17,7 +17,7 @@ from matplotlib.patches import Circle
 from matplotlib.tri import Triangulation
 
 from . import views
-from .views import FREE, SLIP_NEG, SLIP_POS, STICK
+from .views import FREE, SLIP_POS, STICK
 
 MM = 1e3
 STICK_COLOR = "tab:blue"

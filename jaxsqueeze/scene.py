@@ -60,7 +60,7 @@ class Settings:
     max_steps: bound on loop iterations (steps plus event resolutions), static.
     max_events: capacity of the event log, static.
     newton_iters: Newton iteration bound, static.
-    bisect_iters: bisection iterations bound to locate an event, static.
+    bisect_iters: iteration bound for locating an event (regula falsi + bisection), static.
     """
 
     step: float | None = None

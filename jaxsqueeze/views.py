@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-FREE, STICK, SLIP_POS, SLIP_NEG = 0, 1, 2, 3
+from .engine import FREE, SLIP_NEG, SLIP_POS, STICK  # noqa: E402,F401  (one definition of the modes)
 MODE_NAMES = {FREE: "free", STICK: "stick", SLIP_POS: "slip+", SLIP_NEG: "slip-"}
 EVENT_LETTERS = "ABCD"
 EVENT_MEANING = {"A": "new contact", "B": "contact break", "C": "stick to slip", "D": "slip to stick"}
