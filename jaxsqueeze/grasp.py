@@ -161,7 +161,7 @@ def squeeze(scene: Scene) -> SqueezeResult:
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp_of(scene, op), cfg)
     if op.field is not None:
         res = dataclasses.replace(res, displacement=field_displacement(op, F_hat, g_hat) * op.length)
-    if _concrete(res.count) and np.ndim(res.count) == 0:
+    if np.ndim(res.count) == 0 and all(map(_concrete, jax.tree.leaves(res))):   # eager, unbatched
         res = trim(res)
     return res
 

@@ -1,0 +1,112 @@
+"""The bordered system of eq. (4) and deformation from prescribed displacements (Section III)."""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .operator import Compliance, field_displacement
+
+
+def bordered_matrix(A: jax.Array, B: jax.Array, active: jax.Array) -> jax.Array:
+    """M = [[A, B], [Bᵀ, 0]] of eq. (4) over s slots, with inactive slots made inert.
+
+    Args:
+        A: (2s, 2s) compliance block at the slot nodes (scaled).
+        B: (2s, 3) rigid-mode rows at the slot nodes (scaled).
+        active: (s,) bool; an inactive slot gets an identity row, so its force is 0.
+    Returns:
+        (2s + 3, 2s + 3) symmetric matrix, nonsingular when at least two slots are active
+        (Theorem 3).
+    """
+    a2 = jnp.repeat(active, 2)
+    Am = jnp.where(a2[:, None] & a2[None, :], A, 0.0) + jnp.diag(jnp.where(a2, 0.0, 1.0))
+    Bm = jnp.where(a2[:, None], B, 0.0)
+    top = jnp.concatenate([Am, Bm], axis=1)
+    bottom = jnp.concatenate([Bm.T, jnp.zeros((3, 3), A.dtype)], axis=1)
+    return jnp.concatenate([top, bottom], axis=0)
+
+
+@jax.jit
+def bordered_solve(A: jax.Array, B: jax.Array, d: jax.Array, active: jax.Array | None = None):
+    """Solve eq. (4): A f + B g = d, Bᵀ f = 0.
+
+    Args:
+        A: (2s, 2s), B: (2s, 3), d: (2s,) prescribed displacements (scaled), active: (s,) bool.
+    Returns:
+        f: (2s,) forces (scaled; zero at inactive slots), g: (3,) rigid amplitudes
+        (t_x, t_y, rotation) in scaled units.
+    """
+    s = A.shape[0] // 2
+    active = jnp.ones(s, bool) if active is None else active
+    M = bordered_matrix(A, B, active)
+    rhs = jnp.concatenate([jnp.where(jnp.repeat(active, 2), d, 0.0), jnp.zeros(3, d.dtype)])
+    x = jnp.linalg.solve(M, rhs)
+    return x[: 2 * s], x[2 * s:]
+
+
+class Deformation(NamedTuple):
+    """Result of :func:`deform` (SI units).
+
+    forces: (s, 2) forces the prescribers exert on the object at the given nodes [N].
+    g: (3,) rigid part of the displacement: x, y translation [m] and rotation [rad] about
+        the node centroid (the paper's g in an unnormalized basis).
+    displacement: (n, 2) displacement of every node [m], or None if the operator has no field map.
+    """
+
+    forces: jax.Array
+    g: jax.Array
+    displacement: jax.Array | None
+
+
+def boundary_slots(op: Compliance, nodes) -> np.ndarray:
+    """Positions of mesh node indices ``nodes`` among the operator's contact-capable nodes."""
+    nodes = np.asarray(nodes).reshape(-1)
+    where = {int(v): i for i, v in enumerate(np.asarray(op.nodes))}
+    missing = [int(v) for v in nodes if int(v) not in where]
+    if missing:
+        raise ValueError(f"node(s) {missing} are not on the boundary; displacements can only be "
+                         f"prescribed at boundary nodes (see mesh.boundary).")
+    return np.array([where[int(v)] for v in nodes])
+
+
+def slot_dofs(slots: jax.Array) -> jax.Array:
+    """(2s,) interleaved DOF indices of boundary slots."""
+    return jnp.stack([2 * slots, 2 * slots + 1], axis=-1).reshape(-1)
+
+
+def deform(op: Compliance, nodes, displacements) -> Deformation:
+    """Deformation from prescribed displacements of s ≥ 2 boundary nodes (Section III, eq. 4).
+
+    Args:
+        op: compliance operator (:func:`jaxsqueeze.fem.compliance`).
+        nodes: (s,) mesh node indices, each on the boundary, all distinct.
+        displacements: (s, 2) prescribed displacements [m].
+    Returns:
+        :class:`Deformation` with forces [N], g, and the displacement of every node [m].
+    """
+    slots = boundary_slots(op, nodes)
+    s = slots.size
+    if s < 2:
+        raise ValueError(f"deform needs displacements at s >= 2 nodes (got s={s}); with one node "
+                         "the object is free to rotate about it (Section III).")
+    if len(set(slots.tolist())) != s:
+        raise ValueError(f"nodes {np.asarray(nodes).tolist()} contain duplicates; give each node once.")
+    d = jnp.asarray(displacements, op.G.dtype)
+    if d.shape != (s, 2):
+        raise ValueError(f"displacements must have shape ({s}, 2), got {tuple(d.shape)}.")
+    return _deform(op, jnp.asarray(slots), d)
+
+
+@jax.jit
+def _deform(op: Compliance, slots, d):
+    dofs = slot_dofs(slots)
+    f_hat, g = bordered_solve(op.G[dofs][:, dofs], op.N[dofs], d.reshape(-1) / op.length)
+    forces = (f_hat * op.force_scale).reshape(-1, 2)
+    g_si = g * jnp.array([op.length, op.length, 1.0])
+    if op.field is None:
+        return Deformation(forces, g_si, None)
+    F = jnp.zeros(op.G.shape[0], f_hat.dtype).at[dofs].set(f_hat)
+    return Deformation(forces, g_si, field_displacement(op, F, g) * op.length)

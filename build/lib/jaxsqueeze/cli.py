@@ -1,0 +1,205 @@
+"""Command line: ``jaxsqueeze run SCENE.toml --out DIR`` and ``jaxsqueeze demo``."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+EPILOG = """\
+examples:
+  jaxsqueeze demo                          # built-in foam square, outputs in ./demo_out
+  jaxsqueeze demo --out results/foam
+  jaxsqueeze run examples/foam_disk.toml --out out/disk
+  jaxsqueeze run scene.toml --out out --max-edge 0.008 --verbose
+  python -m jaxsqueeze --help
+
+outputs (in DIR):
+  summary.json        status, depths, events, contact regions, total forces, timings
+  deformed.png        deformed object, fingertips, stick (blue) / slip (red) nodes (Fig. 4)
+  force_profile.png   force density and direction along each contact (Fig. 5)
+  sliding_profile.png polar angle of every contact node against depth (Fig. 6)
+  events.png          timeline of the contact events A-D
+  squeeze.xdmf/.h5    ParaView time series, one step per recorded state
+  final.vtu           ParaView file of the final state
+
+exit status: 0 the squeeze reached its depth, 1 it ended otherwise (e.g. SLIP_FAILURE;
+outputs are still written), 2 bad command line or scene file (nothing is written).
+The scene file format is described in jaxsqueeze.scenefile (python -m pydoc jaxsqueeze.scenefile).
+"""
+
+
+class _Progress:
+    """One line per phase on stderr, with the elapsed time; silent unless enabled."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.t0 = time.perf_counter()
+        self.timings: dict = {}
+        self._phase = None
+        self._start = None
+
+    def start(self, phase: str, label: str):
+        self.done()
+        self._phase, self._start = phase, time.perf_counter()
+        if self.enabled:
+            print(f"[{self._start - self.t0:6.1f} s] {label} ...", file=sys.stderr, flush=True)
+
+    def done(self):
+        if self._phase is not None:
+            self.timings[self._phase] = time.perf_counter() - self._start
+            self._phase = None
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="jaxsqueeze",
+        description="Simulate a two-finger squeeze grasp of a soft planar object (Guo, Lin & Jia) "
+                    "and write a summary, plots and ParaView files.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    def common(sp, default_out=None):
+        sp.add_argument("--out", metavar="DIR", default=default_out, required=default_out is None,
+                        help="output folder (created; existing files of the same name are replaced)"
+                        + (f"; default {default_out}" if default_out else ""))
+        sp.add_argument("--max-edge", type=float, metavar="M", default=None,
+                        help="override object.max_edge [m] (coarser = faster)")
+        sp.add_argument("--refine-edge", type=float, metavar="M", default=None,
+                        help="override object.refine_edge [m], the edge length near the grip points")
+        sp.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+        sp.add_argument("-v", "--verbose", action="store_true", help="progress on stderr even when it is not a terminal")
+        sp.add_argument("-q", "--quiet", action="store_true", help="no progress and no summary on stdout")
+
+    r = sub.add_parser("run", help="squeeze the scene of a TOML file",
+                       description="Squeeze the scene described by a TOML scene file.",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("scene", metavar="SCENE.toml", help="scene file (see jaxsqueeze.scenefile)")
+    common(r)
+    d = sub.add_parser("demo", help="squeeze the built-in foam square",
+                       description="Squeeze the built-in foam-square scene (jaxsqueeze/scenes/foam_square.toml).",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    common(d, default_out="demo_out")
+    d.add_argument("--print-scene", action="store_true", help="print the demo scene file and exit")
+    return p
+
+
+def demo_scene_text() -> str:
+    from importlib import resources
+
+    return resources.files("jaxsqueeze").joinpath("scenes/foam_square.toml").read_text(encoding="utf-8")
+
+
+def _error(msg: str) -> int:
+    print(f"error: {msg}", file=sys.stderr)
+    return 2
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == "demo" and args.print_scene:
+        sys.stdout.write(demo_scene_text())
+        return 0
+    progress = _Progress(enabled=not args.quiet and (args.verbose or sys.stderr.isatty()))
+
+    from . import scenefile
+
+    # ---- read and validate everything before touching the output folder or JAX
+    progress.start("meshing", "reading the scene and meshing")
+    try:
+        for opt in ("max_edge", "refine_edge"):
+            v = getattr(args, opt)
+            if v is not None and not (0 < v < float("inf")):
+                raise scenefile.SceneFileError("--" + opt.replace("_", "-"), f"expected a length > 0 m, got {v}")
+        sizes = dict(max_edge=args.max_edge, refine_edge=args.refine_edge)
+        if args.command == "demo":
+            from importlib import resources
+
+            with resources.as_file(resources.files("jaxsqueeze").joinpath("scenes/foam_square.toml")) as path:
+                spec = scenefile.load(path, **sizes)
+        else:
+            spec = scenefile.load(args.scene, **sizes)
+    except scenefile.SceneFileError as e:
+        return _error(str(e))
+    out = os.path.abspath(args.out)
+    if os.path.exists(out) and not os.path.isdir(out):
+        return _error(f"--out: {out} exists and is not a folder")
+
+    # ---- precision: before the first JAX array
+    import jax
+
+    jax.config.update("jax_enable_x64", spec.precision == "float64")
+    return _simulate(spec, out, args, progress)
+
+
+def _simulate(spec, out, args, progress) -> int:
+    import numpy as np
+
+    from . import export, views
+    from .grasp import squeeze
+    from .status import Status
+
+    scene = spec.scene
+    progress.start("operator", f"building the compliance operator ({scene.mesh.n} nodes, "
+                   f"{len(scene.boundary_nodes())} on the boundary)")
+    op = scene.operator()
+    progress.start("squeeze", "compiling + squeezing")
+    res = squeeze(scene)
+    progress.done()
+
+    os.makedirs(out, exist_ok=True)
+    paths = {}
+    if not args.no_plots:
+        progress.start("plots", "plotting")
+        from . import plots
+
+        paths.update({f"{k}_png": v for k, v in plots.save_all(res, scene, out).items()})
+    progress.start("export", "writing ParaView files")
+    paths["xdmf"] = export.write_paraview(out, res, scene.mesh, op=op)
+    paths["vtu"] = export.write_final_vtu(os.path.join(out, "final.vtu"), res, scene.mesh)
+    progress.done()
+    progress.timings["total"] = time.perf_counter() - progress.t0
+
+    summ = views.summary(res, scene, progress.timings)
+    summ = dict(title=spec.title, scene_file=spec.path, precision=spec.precision, **summ)
+    paths["summary"] = os.path.join(out, "summary.json")
+    summ["outputs"] = {k: os.path.basename(v) for k, v in paths.items()}
+    with open(paths["summary"], "w", encoding="utf-8") as fh:
+        json.dump(summ, fh, indent=2)
+        fh.write("\n")
+    if not args.quiet:
+        print(_report(summ, res, out, np))
+    return 0 if res.outcome == Status.SUCCESS else 1
+
+
+def _report(s, res, out, np) -> str:
+    mm = 1e3
+    lines = [f"jaxsqueeze: {s['title']}  ({s['scene_file']})",
+             f"  status       {s['status']}: {s['advice']}",
+             f"  final depth  {s['final_depth'] * mm:.3f} mm of {s.get('target_depth', np.nan) * mm:.3f} mm "
+             f"({100 * s['relative_depth']:.1f} % of the grip distance {s['grip_distance'] * mm:.1f} mm), "
+             f"{s['rows']} recorded states"]
+    seq = s["event_sequence"]
+    counts = ", ".join(f"{k} {seq.count(k)}" for k in "ABCD")
+    shown = seq if len(seq) <= 60 else seq[:57] + "..."
+    lines.append(f"  events       {s['n_events']} ({counts}): {shown or '-'}")
+    for f in (1, 2):
+        cr = s["contact_regions"][f"finger{f}"]
+        F = s["total_force"][f"finger{f}"]
+        regs = "; ".join(
+            f"nodes {r['nodes'][0]}..{r['nodes'][-1]}, polar angle {np.degrees(r['theta_range'][0]):.1f}.."
+            f"{np.degrees(r['theta_range'][1]):.1f} deg" for r in cr["regions"]) or "no contact"
+        lines.append(f"  finger {f}     {cr['n_stick']} stick + {cr['n_slip']} slip nodes in "
+                     f"{len(cr['regions'])} region(s) [{regs}]")
+        lines.append(f"               total force on the object ({F[0]:.3f}, {F[1]:.3f}) N, "
+                     f"|F| = {float(np.hypot(*F)):.3f} N")
+    t = s.get("timings", {})
+    lines.append("  time         " + ", ".join(f"{k} {v:.1f} s" for k, v in t.items()))
+    lines.append(f"  outputs      {out}/: " + ", ".join(s["outputs"].values()))
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,370 @@
+"""Rotation of the contact friction cones during a squeeze (Section V-A, Fig. 3).
+
+Under a squeeze "the two contact friction cones sometimes rotate toward each other, making the
+applied forces more aligned with the axes of the cones, and the grasp more stable (Fig. 3(b)).
+In some other cases, the two cones rotate away from each other, breaking the grasp (Fig. 3(c))."
+This module measures that rotation on a :class:`~jaxsqueeze.grasp.SqueezeResult`. Pure numpy
+on the recorded rows (no JAX code), like :mod:`jaxsqueeze.views`.
+
+Definitions (per recorded row k and finger i = 0, 1; centroid frame, as the result):
+
+* **contact point** ``c_i``: the deformed position of finger i's contact node (point
+  contacts); with several contact nodes (segment contacts) the force-weighted mean.
+* **grasp line** ``l_i``: the unit vector from ``c_i`` toward the other finger's contact
+  ``c_j``. The squeezing force of finger i on the object points along ``+l_i``.
+* **cone axis** ``a_i``: the inward contact normal, the axis of the friction cone (half
+  angle ``atan(mu)``), a unit vector pointing into the object. Two definitions (``axis=``):
+
+  - ``"surface"`` (default): the inward normal of the *deformed object* at the contact.
+    For a :class:`~jaxsqueeze.band.Band` it is exact: the undeformed inward normal rotated by
+    the band's cross-section rotation ``phi`` at the contact node (the Hermite slope DOFs of
+    the band solution for the row's recorded contact forces, plus the rigid rotation fitted
+    to the recorded displacements). For a mesh (or when only the operator is given) it is the
+    inward bisector normal of the two deformed boundary edges at the node (the discrete
+    analogue of ``Mesh.normals``). This is the cone a small spherical fingertip sees (its
+    contact normal is the object's surface normal), the one Fig. 3 draws.
+  - ``"fingertip"``: the direction from the fingertip centre to the contact node,
+    ``unit(theta + alpha)``: the cone the squeeze engine enforces (events C/D). A sticking
+    node keeps its polar angle in the fingertip frame, so this axis only turns when the
+    node slides or the fingertip rotates (``Fingers.rotation``). With point contacts and no
+    fingertip rotation it never turns (see the note below).
+
+* **misalignment** ``psi_i = angle(a_i, l_i)`` in [0, pi].
+* **rotation toward the other finger** ``toward_i(k) = psi_i(0) - psi_i(k)``: positive when
+  the cone axis has turned toward the grasp line, i.e. toward the other finger (Fig. 3(b)),
+  negative when it turned away (Fig. 3(c)). Its magnitude equals the signed rotation
+  ``rotation_i`` (counterclockwise angle from ``a_i(0)`` to ``a_i(k)``) whenever the axis does
+  not cross the grasp line and the line itself does not turn.
+* **cone margin** ``margin_i = atan(mu) - angle(F_i, a_i)`` with ``F_i`` finger i's total force
+  on the object: the angle by which the force stays inside its cone (> 0 inside, 0 on the
+  edge, < 0 outside: it would slip). Two contacts on a linear-elastic body form a two-force
+  member, so ``F_i`` stays along the initial grasp line, and ``margin_i(k) - margin_i(0)``
+  equals ``toward_i(k)`` up to the (small) turn of the grasp line.
+
+Note on point contacts. A sticking node keeps its polar angle on the fingertip (Section
+IV-B), and two contacts on a linear-elastic body form a two-force member whose forces stay
+along the initial segment, so with ``contact="point"`` and no fingertip rotation the engine's
+own cone margin is constant: a feasible grip never reaches SLIP_FAILURE. The surface cone
+does turn, and :func:`grasp_stability` reports the depth at which the force would leave it
+(``surface_slip_depth``).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from . import views
+from .views import FREE
+
+AXES = ("surface", "fingertip")
+
+
+class ConeAxes(NamedTuple):
+    """Cone axes per recorded row (see the module docstring for the definitions).
+
+    depth: (k,) [m]; relative_depth: (k,) d / D0.
+    node: (k, 2) boundary position of each finger's contact node (point contacts; the
+        largest force for several), -1 where the finger has no contact.
+    contact: (k, 2, 2) contact points c_i [m] (centroid frame).
+    axis: (k, 2, 2) unit inward cone axes a_i.
+    line: (k, 2, 2) unit grasp-line directions l_i (from c_i toward the other contact).
+    force: (k, 2, 2) total force of each finger on the object [N].
+    psi: (k, 2) misalignment angle(a_i, l_i) [rad].
+    rotation: (k, 2) counterclockwise rotation of a_i since row 0 [rad].
+    toward: (k, 2) psi(0) - psi(k) [rad]: > 0 turned toward the other finger.
+    margin: (k, 2) atan(mu) - angle(F_i, a_i) [rad] (NaN without friction given).
+    kind: "surface" or "fingertip".
+    """
+
+    depth: np.ndarray
+    relative_depth: np.ndarray
+    node: np.ndarray
+    contact: np.ndarray
+    axis: np.ndarray
+    line: np.ndarray
+    force: np.ndarray
+    psi: np.ndarray
+    rotation: np.ndarray
+    toward: np.ndarray
+    margin: np.ndarray
+    kind: str
+
+
+class Stability(NamedTuple):
+    """Result of :func:`grasp_stability`.
+
+    label: "stabilizing" (the weaker contact's margin grew: the cones turned toward each
+        other), "breaking" (it shrank: they turned away) or "neutral" (no turn above ``tol``).
+    finger_labels: (label of finger 1, label of finger 2), by the sign of ``toward`` at the end.
+    toward: (2,) final rotation toward the other finger [rad].
+    margin: (k, 2) cone margin history [rad]; depth: (k,) [m]; relative_depth: (k,).
+    margin_change: (2,) final minus initial margin [rad].
+    surface_slip_depth: first depth [m] (linear interpolation between rows) at which a
+        margin reaches 0, i.e. the force reaches the cone edge, or None if it never does.
+    cones: the :class:`ConeAxes` it was computed from.
+    """
+
+    label: str
+    finger_labels: tuple
+    toward: np.ndarray
+    margin: np.ndarray
+    depth: np.ndarray
+    relative_depth: np.ndarray
+    margin_change: np.ndarray
+    surface_slip_depth: float | None
+    cones: ConeAxes
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
+
+
+def _angle(a, b):
+    """Unsigned angle between unit vectors (..., 2) [rad], robust near 0 and pi."""
+    return np.arctan2(np.abs(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), np.sum(a * b, axis=-1))
+
+
+def _signed(a, b):
+    """Counterclockwise angle from a to b [rad] in (-pi, pi]."""
+    return np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], np.sum(a * b, axis=-1))
+
+
+def _rot(v, phi):
+    c, s = np.cos(phi), np.sin(phi)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def _unpack(obj):
+    """(object geometry or None, operator or None, E or None, mu or None) from a Scene, a
+    Band/Mesh, or a Compliance."""
+    from .operator import Compliance
+
+    if isinstance(obj, Compliance):
+        return None, obj, None, None
+    if hasattr(obj, "mesh") and hasattr(obj, "material"):          # a Scene
+        mu = float(obj.friction) if obj.friction_model == "coulomb" else 0.0
+        return obj.mesh, None, float(obj.material.E), mu
+    return obj, None, None, None
+
+
+def _geometry(obj, op):
+    """(points (m, 2) centroid frame [m], loops) of the contact-capable nodes."""
+    if obj is not None:
+        B = np.asarray(obj.boundary)
+        return np.asarray(obj.points, float)[B], tuple(obj.loops)
+    return np.asarray(op.points, float) * float(op.length), tuple(op.loops)
+
+
+def _bisector_normals(x, loops):
+    """Outward bisector normals (m, 2) of closed loops of points x (m, 2) (material on the left)."""
+    out = np.zeros_like(x)
+    start = 0
+    for n in loops:
+        q = x[start:start + n]
+        e_next, e_prev = np.roll(q, -1, 0) - q, q - np.roll(q, 1, 0)
+        nrm = lambda e: _unit(np.stack([e[:, 1], -e[:, 0]], 1))   # noqa: E731  right normal
+        out[start:start + n] = _unit(nrm(e_next) + nrm(e_prev))
+        start += n
+    return out
+
+
+def _band_rotations(band, E, res):
+    """(k, m) cross-section rotation phi [rad] of a band at every row (exact, see docstring)."""
+    from .band import band_pinv, band_stiffness
+    from .operator import rigid_modes
+
+    K = band_stiffness(band, E)
+    X = band_pinv(band, K)
+    T = band.to_xy()
+    F = np.asarray(res.forces, float).reshape(len(np.asarray(res.depth)), -1)       # (k, 2m)
+    dofs = (X @ (T.T @ F.T)).T                                                   # (k, 4m)
+    u_c = dofs @ T.T                                                             # (k, 2m)
+    N = np.asarray(rigid_modes(np.asarray(band.points, float)))                  # rotation about origin
+    resid = np.asarray(res.boundary_displacement, float).reshape(len(F), -1) - u_c
+    g = np.linalg.lstsq(N, resid.T, rcond=None)[0].T                             # (k, 3)
+    phi = np.stack([band.rotation(d) for d in dofs])
+    return phi + g[:, 2:3]
+
+
+def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) -> ConeAxes:
+    """Friction-cone axes of both contacts at every recorded row (Fig. 3).
+
+    Args:
+        res: a squeeze result (eager, trimmed).
+        obj: the :class:`~jaxsqueeze.scene.Scene` (preferred: exact band rotations and the
+            friction), the object (:class:`~jaxsqueeze.band.Band` needs ``friction`` and uses
+            E only for the rotation: pass a Scene), or the compliance operator.
+        axis: "surface" (inward normal of the deformed object) or "fingertip" (fingertip
+            centre to contact node); see the module docstring.
+        friction: Coulomb mu for the margin (default: the scene's; NaN margins without it).
+    Returns:
+        :class:`ConeAxes`.
+    """
+    if axis not in AXES:
+        raise ValueError(f"axis={axis!r}; choose one of {AXES}")
+    geo, op, E, mu = _unpack(obj)
+    if friction is not None:
+        mu = float(friction)
+    P, loops = _geometry(geo, op)
+    depth = np.asarray(res.depth, float)
+    k = len(depth)
+    modes, fg = np.asarray(res.modes), np.asarray(res.finger)
+    F = np.asarray(res.forces, float)
+    U = np.asarray(res.boundary_displacement, float)
+    if P.shape[0] != modes.shape[1]:
+        raise ValueError(f"the object has {P.shape[0]} boundary nodes but the result {modes.shape[1]}; "
+                         "pass the scene (or object) the result was computed for")
+    X = P[None] + U                                                  # (k, m, 2) deformed nodes
+    if axis == "surface":
+        from .band import Band
+
+        n0 = _bisector_normals(P, loops) if not isinstance(geo, Band) else np.asarray(geo.normals, float)
+        if isinstance(geo, Band):
+            if E is None:
+                raise ValueError("the exact band rotation needs Young's modulus: pass the Scene, not the Band")
+            nk = _rot(n0[None], _band_rotations(geo, E, res))
+        else:
+            nk = np.stack([_bisector_normals(X[r], loops) for r in range(k)])
+        inward = -nk                                                  # (k, m, 2)
+    else:
+        ang = np.asarray(res.theta, float) + np.take_along_axis(np.asarray(res.alpha, float), fg.astype(int), 1)
+        inward = np.stack([np.cos(ang), np.sin(ang)], -1)             # centre → node
+    node = np.full((k, 2), -1)
+    contact = np.full((k, 2, 2), np.nan)
+    ax = np.full((k, 2, 2), np.nan)
+    force = np.zeros((k, 2, 2))
+    for r in range(k):
+        for f in (0, 1):
+            on = np.flatnonzero((modes[r] > FREE) & (fg[r] == f))
+            if not on.size:
+                continue
+            w = np.linalg.norm(F[r, on], axis=1)
+            node[r, f] = on[int(np.argmax(w))]
+            w = w / w.sum() if w.sum() > 0 else np.full(len(on), 1.0 / len(on))
+            contact[r, f] = w @ X[r, on]
+            ax[r, f] = _unit(w @ inward[r, on])
+            force[r, f] = F[r, on].sum(0)
+    line = _unit(np.stack([contact[:, 1] - contact[:, 0], contact[:, 0] - contact[:, 1]], 1))
+    psi = _angle(ax, line)
+    rotation = _signed(ax[:1], ax)
+    toward = psi[:1] - psi
+    fdir = _unit(force)
+    # the first row (initial touch) carries no force yet: use the direction it takes at 0+
+    # (the next row with a force; the response is linear in d until the first event)
+    fmag = np.linalg.norm(force, axis=-1)
+    has = fmag > 1e-9 * max(float(np.max(fmag)), 1e-300)     # round-off forces have no direction
+    for f in (0, 1):
+        nxt = np.flatnonzero(has[:, f])
+        if nxt.size:
+            for r in np.flatnonzero(~has[:, f]):
+                later = nxt[nxt > r]
+                if later.size:
+                    fdir[r, f] = fdir[later[0], f]
+    margin = (np.arctan(mu) - _angle(fdir, ax)) if mu is not None else np.full((k, 2), np.nan)
+    rel = depth / views.grip_distance(res)
+    return ConeAxes(depth, rel, node, contact, ax, line, force, psi, rotation, toward, margin, axis)
+
+
+def grasp_stability(res, obj, axis: str = "surface", friction: float | None = None,
+                    tol: float = 1e-6) -> Stability:
+    """Do the friction cones turn toward each other (stabilizing) or away (breaking)?
+
+    The overall label follows the *weaker* contact (the one with the smaller final margin):
+    "stabilizing" if its margin grew over the squeeze by more than ``tol`` [rad], "breaking"
+    if it shrank by more than ``tol``, else "neutral". Each finger's own label follows the sign
+    of its final ``toward`` rotation. See :func:`cone_axes` for the arguments.
+    """
+    c = cone_axes(res, obj, axis=axis, friction=friction)
+    if np.all(np.isnan(c.margin)):
+        raise ValueError("grasp_stability needs the friction coefficient: pass the Scene or friction=")
+
+    def lab(x):
+        return "stabilizing" if x > tol else ("breaking" if x < -tol else "neutral")
+
+    change = c.margin[-1] - c.margin[0]
+    weak = int(np.nanargmin(c.margin[-1]))
+    slip = None
+    low = np.nanmin(c.margin, axis=1)
+    below = np.flatnonzero(low <= 0)
+    if below.size:
+        r = int(below[0])
+        if r == 0:
+            slip = float(c.depth[0])
+        else:
+            t = low[r - 1] / (low[r - 1] - low[r])
+            slip = float(c.depth[r - 1] + t * (c.depth[r] - c.depth[r - 1]))
+    return Stability(lab(change[weak]), tuple(lab(v) for v in c.toward[-1]), c.toward[-1].copy(), c.margin,
+                     c.depth, c.relative_depth, change, slip, c)
+
+
+def plot_cone_rotation(res, obj, axis: str = "surface", friction: float | None = None):
+    """Fig. 3 analogue: the cones at the start and at the end, their rotation toward the
+    other finger and the cone margins against the relative depth.
+
+    Left: the deformed object near the two contacts with the friction cones (initial:
+    dashed, final: solid) and the force directions. Middle: ``toward`` [deg] per finger.
+    Right: cone margin [deg] per finger (0 = on the cone edge: slip). Returns a Figure.
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
+
+    from .plots import DPI, FINGER_COLORS, MM
+
+    st = grasp_stability(res, obj, axis=axis, friction=friction)
+    c = st.cones
+    geo, op, _, mu = _unpack(obj)
+    mu = float(friction) if friction is not None else mu
+    P, loops = _geometry(geo, op)
+    off = np.asarray(getattr(geo, "offset", np.zeros(2)), float)
+    fig = Figure(figsize=(14, 4.6), dpi=DPI, layout="constrained")
+    a0, a1, a2 = fig.subplots(1, 3, width_ratios=[1.2, 1, 1])
+    # --- geometry with cones
+    U = np.asarray(res.boundary_displacement, float)
+    start = 0
+    for n in loops:
+        for r, style in ((0, "--"), (-1, "-")):
+            q = P[start:start + n] + U[r, start:start + n] + off
+            q = np.vstack([q, q[:1]]) * MM
+            a0.plot(q[:, 0], q[:, 1], style, color="0.5" if r == 0 else "0.15", lw=1.0)
+        start += n
+    half = np.arctan(mu)
+    size = 0.12 * float(np.max(np.ptp(P, axis=0)))
+    for f in (0, 1):
+        for r, style, alpha in ((0, "--", 0.10), (-1, "-", 0.22)):
+            p, a = c.contact[r, f] + off, c.axis[r, f]
+            if not np.all(np.isfinite(a)):
+                continue
+            e1, e2 = _rot(a, half), _rot(a, -half)
+            tri = np.array([p, p + size * e1, p + size * e2]) * MM
+            a0.fill(tri[:, 0], tri[:, 1], color=FINGER_COLORS[f], alpha=alpha, lw=0)
+            a0.plot(*(np.array([p, p + size * a]) * MM).T, style, color=FINGER_COLORS[f], lw=1.2)
+        p, fd = c.contact[-1, f] + off, _unit(c.force[-1, f])
+        a0.annotate("", xy=(p + 0.8 * size * fd) * MM, xytext=p * MM,
+                    arrowprops=dict(arrowstyle="->", color="k", lw=1.4))
+        a0.add_patch(Circle(
+            (np.asarray(res.centres[-1, f], float) + off) * MM, float(res.radius) * MM,
+            facecolor=FINGER_COLORS[f], alpha=0.3, edgecolor=FINGER_COLORS[f]))
+    a0.set_aspect("equal")
+    a0.set_xlabel("x [mm]")
+    a0.set_ylabel("y [mm]")
+    a0.set_title(f"friction cones ({c.kind} axis)\nstart: dashed, end: solid; arrows: forces", fontsize=10)
+    a0.grid(True, lw=0.3, alpha=0.5)
+    x = 100 * c.relative_depth
+    for f in (0, 1):
+        a1.plot(x, np.degrees(c.toward[:, f]), "-", color=FINGER_COLORS[f], lw=1.6,
+                label=f"finger {f + 1}: {st.finger_labels[f]}")
+        a2.plot(x, np.degrees(c.margin[:, f]), "-", color=FINGER_COLORS[f], lw=1.6, label=f"finger {f + 1}")
+    a2.axhline(0.0, color="tab:red", lw=1.0, ls=":", label="cone edge (slip)")
+    a1.axhline(0.0, color="0.5", lw=0.8)
+    a1.set_xlabel("relative squeeze depth d / D0 [%]")
+    a1.set_ylabel("cone rotation toward the other finger [deg]")
+    a1.set_title(f"cone rotation: {st.label}")
+    a2.set_xlabel("relative squeeze depth d / D0 [%]")
+    a2.set_ylabel("cone margin atan(mu) - angle(F, axis) [deg]")
+    a2.set_title("margin of the force inside its cone")
+    for a in (a1, a2):
+        a.grid(True, lw=0.3, alpha=0.6)
+        a.legend(fontsize=8, loc="best")
+    return fig

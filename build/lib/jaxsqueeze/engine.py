@@ -1,0 +1,560 @@
+"""The event-driven squeeze (Section IV, DESIGN 2.1 and 2.4–2.7).
+
+One finger stays still, the other translates toward it by the depth d. Every boundary node is
+free, sticking to a fingertip at a fixed anchor angle, or sliding on it with its force on a
+friction-cone edge. Each step solves the *total* equations from the undeformed state for the
+current contact configuration (DESIGN 2.1): prescribed positions of the contact nodes on the
+fingertip circles, the bordered system (eq. 4) for the forces, and Newton on the slip angles
+(system S, eq. 6) with ``jax.jacobian``. Signed event functions detect events A–D; the
+earliest crossing is bracketed (Illinois regula falsi, safeguarded by bisection) and refined by
+one implicit-function step, so the event depth carries its derivative.
+
+Units inside are scaled (DESIGN 2.3): lengths / L, forces / (E h L).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from . import linalg
+from .bordered import bordered_matrix, slot_dofs
+from .operator import Compliance
+from .status import Status
+
+FREE, STICK, SLIP_POS, SLIP_NEG = 0, 1, 2, 3   # per-node modes; SLIP_POS slides toward larger θ
+EVENT_KINDS = "ABCD"                          # new contact, break, stick→slip, slip→stick
+RUNNING = -1
+CONE_SLACK = 1e-7   # [rad] a force this close to its cone edge counts as inside (round-off)
+
+
+# ----------------------------------------------------------------------------- configuration
+@dataclass(frozen=True)
+class Config:
+    """Static configuration: which effects are compiled in (DESIGN 2.7) and capacities."""
+
+    friction_model: str = "coulomb"   # "coulomb" | "frictionless" | "stick"
+    contact: str = "segment"          # "segment" | "point"
+    rotation: bool = False
+    capacity: int = 64
+    max_steps: int = 400
+    max_events: int = 256
+    newton_iters: int = 30
+    bisect_iters: int = 40
+
+    @property
+    def newton(self) -> bool:
+        return self.friction_model != "stick"
+
+    @property
+    def slip_events(self) -> bool:   # events C and D
+        return self.friction_model == "coulomb"
+
+
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class Grasp:
+    """Traced grasp parameters in SI units (they become scaled inside :func:`simulate`).
+
+    grip: (2,) int positions of the two grip nodes among the operator's nodes.
+    radius: fingertip radius [m]; mu: friction coefficient; depth: target depth [m];
+    step: squeeze step [m]; event_tol: event bracket width [m]; newton_tol: [rad];
+    gap_tol: penetration tolerance [m]; rotation: (2, k) polynomial coefficients of α_i(d).
+    """
+
+    grip: jax.Array
+    radius: jax.Array
+    mu: jax.Array
+    depth: jax.Array
+    step: jax.Array
+    event_tol: jax.Array
+    newton_tol: jax.Array
+    gap_tol: jax.Array
+    rotation: jax.Array
+
+
+def unit(a):
+    return jnp.stack([jnp.cos(a), jnp.sin(a)], axis=-1)
+
+
+def cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+class Model(NamedTuple):
+    """Everything fixed during one squeeze, in scaled units."""
+
+    op: Compliance
+    cfg: Config
+    o1: jax.Array        # (2,) centre of finger 1
+    o2: jax.Array        # (2,) initial centre of finger 2
+    e: jax.Array         # (2,) unit direction finger 2 moves in
+    r: jax.Array         # radius
+    phi: jax.Array       # friction angle atan(mu)
+    mu: jax.Array
+    L: jax.Array
+    rotation: jax.Array  # (2, k), SI
+
+    def centres(self, d):
+        return jnp.stack([self.o1, self.o2 + d * self.e])
+
+    def angles(self, d):
+        if not self.cfg.rotation:
+            return jnp.zeros(2, self.r.dtype)
+        return jax.vmap(jnp.polyval, (0, None))(self.rotation, d * self.L)
+
+
+def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
+    L = op.length
+    p = op.points[grasp.grip]
+    n = op.normals[grasp.grip]
+    r = grasp.radius / L
+    o = p + r * n
+    e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
+    mu = jnp.asarray(grasp.mu, op.G.dtype)
+    phi = jnp.arctan(mu) if cfg.friction_model == "coulomb" else jnp.zeros_like(mu)
+    return Model(op, cfg, o[0], o[1], e, r, phi, mu, L, jnp.asarray(grasp.rotation, op.G.dtype))
+
+
+# ----------------------------------------------------------------------------- one configuration
+class Contacts(NamedTuple):
+    """The contact set packed into fixed slots, with the bordered matrix factored once."""
+
+    idx: jax.Array      # (S,) node positions (padding points at node 0)
+    active: jax.Array   # (S,) bool
+    mode: jax.Array     # (S,)
+    finger: jax.Array   # (S,)
+    theta0: jax.Array   # (S,) anchors (stick) or initial guesses (slip)
+    dofs: jax.Array     # (2S,)
+    Minv: jax.Array     # (2S + 3, 2S + 3) inverse of the bordered matrix (eq. 4)
+    armed: jax.Array    # (S,) bool: event D may fire (the slip rate was consistent)
+
+
+def pack(model: Model, mode, finger, theta, armed=None) -> Contacts:
+    S = model.cfg.capacity
+    idx = jnp.nonzero(mode > FREE, size=S, fill_value=0)[0]
+    active = jnp.arange(S) < jnp.sum(mode > FREE)
+    dofs = slot_dofs(idx)
+    G = model.op.G
+    M = bordered_matrix(G[dofs][:, dofs], model.op.N[dofs], active)
+    armed = jnp.ones(S, bool) if armed is None else armed[idx]
+    return Contacts(idx, active, jnp.where(active, mode[idx], FREE), finger[idx], theta[idx], dofs,
+                    linalg.inv(M), armed)
+
+
+def slot_forces(model: Model, c: Contacts, th, d):
+    """Forces (S, 2) and rigid amplitudes g (3,) with slot nodes at polar angles ``th``."""
+    S = c.idx.shape[0]
+    pos = model.centres(d)[c.finger] + model.r * unit(th + model.angles(d)[c.finger])
+    disp = (pos - model.op.points[c.idx]).reshape(-1)
+    rhs = jnp.concatenate([jnp.where(jnp.repeat(c.active, 2), disp, 0.0), jnp.zeros(3, disp.dtype)])
+    x = c.Minv @ rhs
+    return x[: 2 * S].reshape(S, 2), x[2 * S:]
+
+
+def slip_residual(model: Model, c: Contacts, th, d):
+    """System S (eq. 6): sliding forces on their cone edge; other slots keep their angle."""
+    f, _ = slot_forces(model, c, th, d)
+    sliding = c.active & (c.mode >= SLIP_POS)
+    sign = jnp.where(c.mode == SLIP_POS, 1.0, -1.0)
+    edge = th + model.angles(d)[c.finger] - sign * model.phi
+    return jnp.where(sliding, cross2(f, unit(edge)), th - c.theta0)
+
+
+def _lin_solve(model: Model, J, r):
+    if model.cfg.friction_model == "frictionless":
+        # Neutral modes (docs/numerics.md): a frictionless object between round tips can spin
+        # or drift sideways at (almost) no cost. A truncated pseudo-inverse leaves every
+        # direction the contacts resist less than linalg.NEUTRAL_RTOL of the stiffest one
+        # where it is, so such a mode stays unexcited instead of swinging.
+        return linalg.lstsq(J, r)
+    return linalg.solve(J, r)
+
+
+def slip_angles(model: Model, c: Contacts, d, tol):
+    """Newton on system S with the Jacobian from ``jax.jacobian``; implicit derivatives.
+
+    Returns (theta (S,), converged bool).
+    """
+    if not model.cfg.newton:
+        return c.theta0, jnp.array(True)
+    tol = lax.stop_gradient(tol)
+
+    def newton(R, x0):
+        def cond(s):
+            return (s[1] < model.cfg.newton_iters) & (s[2] > tol)
+
+        def body(s):
+            x, it, _ = s
+            dx = _lin_solve(model, jax.jacobian(R)(x), R(x))
+            return x - dx, it + 1, jnp.max(jnp.abs(dx))
+
+        x, _, dx = lax.while_loop(cond, body, (x0, 0, jnp.array(jnp.inf, x0.dtype)))
+        return x, dx
+
+    def tangent_solve(g, y):
+        return _lin_solve(model, jax.jacobian(g)(y), y)
+
+    def solve_s():
+        th, last = lax.custom_root(lambda th: slip_residual(model, c, th, d), c.theta0, newton, tangent_solve,
+                                   has_aux=True)
+        return th, lax.stop_gradient(last) <= tol
+
+    # without sliding contacts system S is empty: every angle is its anchor
+    return lax.cond(jnp.any(c.active & (c.mode >= SLIP_POS)), solve_s, lambda: (c.theta0, jnp.array(True)))
+
+
+def slip_rates(model: Model, c: Contacts, th, d):
+    """dθ/dε by the implicit function theorem on system S, both Jacobians from ``jax.jacobian``."""
+    if not model.cfg.slip_events:
+        return jnp.zeros_like(th)
+
+    def rates():
+        J_th = jax.jacobian(slip_residual, 2)(model, c, th, d)
+        J_d = jax.jacobian(slip_residual, 3)(model, c, th, d)
+        return -_lin_solve(model, J_th, J_d)
+
+    return lax.cond(jnp.any(c.active & (c.mode >= SLIP_POS)), rates, lambda: jnp.zeros_like(th))
+
+
+class Solution(NamedTuple):
+    th: jax.Array       # (S,) slot polar angles (finger frame)
+    f: jax.Array        # (S, 2) slot forces
+    g: jax.Array        # (3,)
+    ok: jax.Array       # Newton converged
+    u: jax.Array        # (m, 2) boundary displacements
+    F: jax.Array        # (m, 2) boundary forces
+    e: jax.Array        # (m,) event functions: an event crossed where e < 0
+    kind: jax.Array     # (m,) which event each node's function stands for
+    ft: jax.Array       # (m,) tangential force (for the slip sign)
+    fn: jax.Array       # (m,) normal force
+    rate: jax.Array     # (m,) slip rate along the sliding direction, s·dθ/dε (0 where not sliding)
+
+
+def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
+    """Solve the configuration at depth ``d`` and evaluate every event function."""
+    newton_tol, gap_tol = grasp_tols
+    op, m = model.op, model.op.m
+    th, ok = slip_angles(model, c, d, newton_tol)
+    f, g = slot_forces(model, c, th, d)
+    f = jnp.where(c.active[:, None], f, 0.0)
+    u = (op.G[:, c.dofs] @ f.reshape(-1) + op.N @ g).reshape(m, 2)
+    F = jnp.zeros((m, 2), f.dtype).at[c.idx].add(f)
+
+    # event A: gap of each free node to the nearest fingertip
+    x = op.points + u
+    gaps = jnp.linalg.norm(x[:, None, :] - model.centres(d)[None], axis=-1) - model.r
+    eA = jnp.min(gaps, axis=1) + gap_tol
+    if model.cfg.contact == "point":
+        eA = jnp.full_like(eA, jnp.inf)
+
+    # events B, C, D at the contact slots
+    axis = unit(th + model.angles(d)[c.finger])    # cone axis: from the tip centre to the node
+    if model.cfg.contact == "point":
+        # a point contact (Section V-A) has the object's own deformed surface normal as its cone
+        # axis: it turns as the band bends (Fig. 3), while the node stays put on the tip
+        axis = -surface_normals(op, x)[c.idx]
+    fn = jnp.sum(f * axis, -1)
+    ft = cross2(axis, f)            # f · t, t the axis turned by +90°
+    stick = c.mode == STICK
+    rate = jnp.zeros_like(th)
+    if model.cfg.slip_events:
+        margin = cone_margin(model, fn, ft)
+        rate = jnp.where(c.mode == SLIP_POS, 1.0, jnp.where(c.mode == SLIP_NEG, -1.0, 0.0)) * slip_rates(model, c, th, d)
+        other = jnp.where(stick, margin, jnp.where(c.armed, rate, jnp.inf))
+        e_slot = jnp.minimum(fn, other)
+        k_slot = jnp.where(fn < other, 1, jnp.where(stick, 2, 3))
+    else:
+        e_slot, k_slot = fn, jnp.ones_like(c.mode)
+    safe = jnp.where(c.active, c.idx, m)
+    e = eA.at[safe].set(e_slot, mode="drop")
+    kind = jnp.zeros(m, jnp.int32).at[safe].set(k_slot, mode="drop")
+    fn_full = jnp.zeros(m, f.dtype).at[safe].set(fn, mode="drop")
+    ft_full = jnp.zeros(m, f.dtype).at[safe].set(ft, mode="drop")
+    rate_full = jnp.zeros(m, f.dtype).at[safe].set(rate, mode="drop")
+    e = jnp.where((mode == FREE) | (kind > 0), e, jnp.inf)
+    return Solution(th, f, g, ok, u, F, e, kind, ft_full, fn_full, rate_full)
+
+
+# ----------------------------------------------------------------------------- loop state
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class State:
+    d: jax.Array
+    mode: jax.Array         # (m,)
+    finger: jax.Array       # (m,)
+    theta: jax.Array        # (m,) anchor (stick) or current (slip) polar angle, finger frame
+    armed: jax.Array        # (m,) bool, event D armed (see _arm)
+    F: jax.Array            # (m, 2)
+    u: jax.Array            # (m, 2)
+    g: jax.Array            # (3,)
+    it: jax.Array
+    status: jax.Array
+    n_ev: jax.Array
+    events: tuple           # depth (E,), node (E,), kind (E,), finger (E,)
+    hist: tuple             # depth (H,), mode, finger, theta (H, m), F, u (H, m, 2), centres (H, 2, 2), alpha (H, 2)
+    count: jax.Array
+
+
+def _record(model: Model, st: State, row) -> tuple:
+    vals = (st.d, st.mode.astype(jnp.int8), st.finger.astype(jnp.int8), st.theta, st.F, st.u,
+            model.centres(st.d), model.angles(st.d))
+    return tuple(h.at[row].set(v) for h, v in zip(st.hist, vals))
+
+
+def _settle(model: Model, st: State, c: Contacts, sol: Solution, d) -> State:
+    """Adopt a solved configuration at depth d (slip angles move, anchors stay)."""
+    safe = jnp.where(c.active, c.idx, model.op.m)
+    theta = st.theta.at[safe].set(sol.th, mode="drop")
+    return dataclasses.replace(st, d=d, theta=theta, F=sol.F, u=sol.u, g=sol.g, armed=_arm(st.armed, sol))
+
+
+def _arm(armed, sol: Solution):
+    """Event D fires when the slip rate *crosses* zero. A node whose slip starts with an
+    inconsistent rate (a jam: neither sticking nor sliding is consistent there) keeps
+    sliding with its force on the cone edge until its rate has been consistent once.
+    This keeps every force admissible and rules out C/D chatter at one depth."""
+    return armed | (sol.rate > 0)
+
+
+def _failure(model: Model, mode, finger):
+    contact = mode > FREE
+    per = jnp.stack([jnp.sum(contact & (finger == k)) for k in (0, 1)])
+    lost = jnp.any(per == 0)
+    if model.cfg.slip_events:
+        slid = jnp.stack([jnp.sum((mode >= SLIP_POS) & (finger == k)) for k in (0, 1)])
+        return lost | jnp.any(slid == per)
+    return lost
+
+
+def _new_contacts(model: Model, st: State, sol: Solution, kind, d, flag):
+    """Apply the flagged events of ``kind`` (0–3 for A–D) at depth d.
+
+    Returns (mode, finger, theta, added).
+    """
+    # A: attach at the polar angle where the node meets the fingertip
+    x = model.op.points + sol.u
+    C = model.centres(d)
+    near = jnp.argmin(jnp.linalg.norm(x[:, None, :] - C[None], axis=-1), axis=1)
+    ang = jnp.arctan2(*(x - C[near]).T[::-1]) - model.angles(d)[near]
+    added = flag & (kind == 0)
+    first = STICK if model.cfg.friction_model != "frictionless" else SLIP_POS
+    mode = jnp.where(added, first, st.mode)
+    finger = jnp.where(added, near, st.finger)
+    theta = jnp.where(added, ang, st.theta)
+    # B: release
+    mode = jnp.where(flag & (kind == 1), FREE, mode)
+    # C: stick → slip, sliding opposite to the tangential force
+    slip_mode = jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG)
+    mode = jnp.where(flag & (kind == 2), slip_mode, mode)
+    # D: slip → stick at the current angle (theta already holds it)
+    mode = jnp.where(flag & (kind == 3), STICK, mode)
+    return mode.astype(jnp.int32), finger.astype(jnp.int32), theta, added
+
+
+def surface_normals(op: Compliance, x):
+    """(m, 2) outward unit normals of the boundary polygon through the positions ``x`` (m, 2).
+
+    Each loop runs with the material on its left, so the outward normal of the chord from the
+    previous to the next node is that chord turned by −90°.
+    """
+    prev, nxt = _neighbours(op.loops, op.m)
+    t = x[nxt] - x[prev]
+    n = jnp.stack([t[:, 1], -t[:, 0]], axis=1)
+    return n / jnp.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _neighbours(loops, m):
+    loops = loops or (m,)
+    prev, nxt, start = [], [], 0
+    for size in loops:
+        k = np.arange(size)
+        prev.append(start + (k - 1) % size)
+        nxt.append(start + (k + 1) % size)
+        start += size
+    return np.concatenate(prev), np.concatenate(nxt)
+
+
+def cone_margin(model: Model, fn, ft):
+    """|f| sin(φ + slack − ψ), ψ the force's angle from the contact normal: > 0 inside the cone.
+
+    Written with sines and cosines so that μ → ∞ (φ → π/2) stays finite; the slack
+    ``CONE_SLACK`` absorbs round-off, the same slack the grip check allows.
+    """
+    a = model.phi + CONE_SLACK
+    return jnp.sin(a) * fn - jnp.cos(a) * jnp.abs(ft)
+
+
+def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols):
+    """New contacts stick first; one whose force leaves the cone (or pulls) is changed.
+
+    A contact that found no slot (overflow) is left alone: the caller reports
+    ``Status.OVERFLOW``.
+    """
+    c = pack(model, mode, finger, theta)
+    sol = solve_at(model, c, mode, d + eta, tols)
+    slotted = jnp.zeros(mode.shape, bool).at[jnp.where(c.active, c.idx, mode.shape[0])].set(True, mode="drop")
+    pull = added & slotted & (sol.fn <= 0)
+    mode = jnp.where(pull, FREE, mode)
+    if model.cfg.slip_events:
+        out = added & slotted & ~pull & (cone_margin(model, sol.fn, sol.ft) < 0)
+        mode = jnp.where(out, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
+    return mode.astype(jnp.int32)
+
+
+def simulate(op: Compliance, grasp: Grasp, cfg: Config):
+    """The jittable core of :func:`jaxsqueeze.squeeze`: a ``lax.while_loop`` over steps.
+
+    Returns the final :class:`State` (scaled units; history and event log padded).
+    """
+    model = make_model(op, grasp, cfg)
+    L = op.length
+    dt = op.G.dtype
+    m, S = op.m, cfg.capacity
+    D, h = grasp.depth / L, grasp.step / L
+    tols = (grasp.newton_tol, grasp.gap_tol / L)
+    ev_tol = grasp.event_tol / L
+    eta = jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps)   # probe offset, above round-off in float32
+
+    # initial contacts: the grip nodes, sticking (or sliding when frictionless)
+    i, j = grasp.grip[0], grasp.grip[1]
+    P = op.points
+    C0 = model.centres(jnp.zeros((), dt))
+    a0 = model.angles(jnp.zeros((), dt))
+    first = STICK if cfg.friction_model != "frictionless" else SLIP_POS
+    mode = jnp.zeros(m, jnp.int32).at[i].set(first).at[j].set(first)
+    finger = jnp.zeros(m, jnp.int32).at[j].set(1)
+    ang = lambda k, f: jnp.arctan2(*(P[k] - C0[f])[::-1]) - a0[f]  # noqa: E731
+    theta = jnp.zeros(m, dt).at[i].set(ang(i, 0)).at[j].set(ang(j, 1))
+    added = jnp.zeros(m, bool).at[i].set(True).at[j].set(True)
+    mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt), eta, tols) \
+        if cfg.slip_events else mode
+
+    # the segment between the initial contacts must lie inside both friction cones
+    seg = (P[j] - P[i]) / jnp.linalg.norm(P[j] - P[i])
+    inward = -op.normals[grasp.grip]
+    angles = jnp.arccos(jnp.clip(jnp.array([inward[0] @ seg, -(inward[1] @ seg)]), -1.0, 1.0))
+    feasible = jnp.all(angles <= model.phi + CONE_SLACK) | (cfg.friction_model == "stick")
+
+    E, H = cfg.max_events, cfg.max_steps + 1
+    z = jnp.zeros
+    st = State(jnp.zeros((), dt), mode, finger, theta, jnp.zeros(m, bool), z((m, 2), dt), z((m, 2), dt), z(3, dt),
+               jnp.array(0, jnp.int32), jnp.array(RUNNING, jnp.int32), jnp.array(0, jnp.int32),
+               (z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
+               (z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
+                z((H, m, 2), dt), z((H, 2, 2), dt), z((H, 2), dt)),
+               jnp.array(1, jnp.int32))
+    c = pack(model, st.mode, st.finger, st.theta)
+    sol = solve_at(model, c, st.mode, st.d, tols)
+    st = _settle(model, st, c, sol, st.d)
+    st = _with(st, hist=_record(model, st, 0))
+    status0 = jnp.where(~feasible, Status.INFEASIBLE_GRIP,
+                        jnp.where(_failure(model, st.mode, st.finger), Status.SLIP_FAILURE, RUNNING))
+    st = _with(st, status=jnp.asarray(status0, jnp.int32))
+
+    def step(st: State) -> State:
+        d0 = st.d
+        d1 = jnp.minimum(d0 + h, D)
+        c = pack(model, st.mode, st.finger, st.theta, st.armed)
+        s1 = solve_at(model, c, st.mode, d1, tols)
+        crossed = jnp.any(s1.e < 0)
+        return lax.cond(crossed, lambda: _event(st, c, s1, d0, d1), lambda: _advance(st, c, s1, d1))
+
+    def _advance(st, c, s1, d1):
+        st = _settle(model, st, c, s1, d1)
+        return _finish(st, s1.ok)
+
+    def locate(c, mode, d0, d1, e1):
+        """Bracket the earliest sign change of min_k e_k(d) in [d0, d1] to ``event_tol``.
+
+        Illinois regula falsi (superlinear on smooth crossings) safeguarded by bisection.
+        """
+        E = lambda dd: jnp.min(solve_at(model, c, mode, dd, tols).e)  # noqa: E731
+        e0 = E(d0)
+
+        def cond(s):
+            lo, hi, *_, it = s
+            return (hi - lo > ev_tol) & (it < cfg.bisect_iters)
+
+        def body(s):
+            lo, hi, elo, ehi, side, it = s
+            t = elo / (elo - ehi)
+            t = jnp.where(jnp.isfinite(t) & (it % 4 != 3), jnp.clip(t, 0.01, 0.99), 0.5)
+            mid = lo + t * (hi - lo)
+            em = E(mid)
+            hit = em < 0
+            # Illinois: when the same end survives twice, halve its value
+            elo2 = jnp.where(hit, jnp.where(side == -1, 0.5 * elo, elo), em)
+            ehi2 = jnp.where(hit, em, jnp.where(side == 1, 0.5 * ehi, ehi))
+            return (jnp.where(hit, lo, mid), jnp.where(hit, mid, hi), elo2, ehi2,
+                    jnp.where(hit, -1, 1), it + 1)
+
+        lo, hi, *_ = lax.while_loop(cond, body, (d0, d1, jnp.maximum(e0, 0.0), e1, 0, 0))
+        return lo, hi
+
+    def _event(st, c, s1, d0, d1):
+        lo, hi = locate(c, st.mode, d0, d1, jnp.min(s1.e))
+        s_hi = solve_at(model, c, st.mode, hi, tols)
+        e_of = lambda dd: solve_at(model, c, st.mode, dd, tols).e  # noqa: E731
+        e_hi, de_hi = jax.jvp(e_of, (hi,), (jnp.ones_like(hi),))
+        flag = e_hi < 0
+        # one implicit-function step on the earliest event condition: d* carries dd*/dp
+        est = jnp.where(flag & (de_hi < 0), hi - e_hi / jnp.where(de_hi < 0, de_hi, -1.0), hi)
+        d_star = jnp.clip(jnp.min(jnp.where(flag, est, jnp.inf)), lo, hi)
+        s_star = solve_at(model, c, st.mode, d_star, tols)
+        st = _settle(model, st, c, s_star, d_star)
+        kinds = jnp.where(st.mode == FREE, 0, s_hi.kind)
+        mode, finger, theta, added = _new_contacts(model, st, s_star, kinds, d_star, flag)
+        if cfg.slip_events or cfg.friction_model == "frictionless":
+            overflow = jnp.sum(mode > FREE) > S
+            mode = _test_hypothesis(model, mode, finger, theta, added, d_star, eta, tols)
+        # log the events
+        nodes = jnp.arange(m)
+        order = jnp.cumsum(flag) - 1 + st.n_ev
+        slot = jnp.where(flag & (order < E), order, E)
+        ev_d, ev_n, ev_k, ev_f = st.events
+        events = (ev_d.at[slot].set(d_star, mode="drop"), ev_n.at[slot].set(op.nodes[nodes].astype(jnp.int32), mode="drop"),
+                  ev_k.at[slot].set(kinds.astype(jnp.int32), mode="drop"), ev_f.at[slot].set(finger, mode="drop"))
+        n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
+        # re-solve with the new modes at d*
+        c2 = pack(model, mode, finger, theta)
+        changed = mode != st.mode
+        st2 = _with(st, mode=mode, finger=finger, theta=theta, events=events, n_ev=n_ev,
+                    armed=st.armed & ~changed)
+        s2 = solve_at(model, c2, mode, d_star, tols)
+        st2 = _settle(model, st2, c2, s2, d_star)
+        if not (cfg.slip_events or cfg.friction_model == "frictionless"):
+            overflow = jnp.sum(mode > FREE) > S
+        st2 = _finish(st2, s2.ok & s_star.ok)
+        # an event that undid itself at the depth it started from (a new contact that pulls at
+        # once) would repeat forever: stop with a status instead
+        stalled = jnp.all(mode == st.mode) & (d_star <= d0)
+        status = jnp.where(overflow, Status.OVERFLOW, jnp.where(n_ev > E, Status.EVENT_OVERFLOW,
+                           jnp.where(stalled & (st2.status == RUNNING), Status.STALLED, st2.status)))
+        return _with(st2, status=status.astype(jnp.int32))
+
+    def _finish(st, ok):
+        it = st.it + 1
+        hist = _record(model, _with(st, it=it), st.count)
+        count = st.count + 1
+        finite = jnp.all(jnp.isfinite(st.F)) & jnp.all(jnp.isfinite(st.u))
+        status = jnp.where(~finite, Status.NONFINITE,
+                 jnp.where(~ok, Status.NEWTON_FAILURE,
+                 jnp.where(_failure(model, st.mode, st.finger), Status.SLIP_FAILURE,
+                 jnp.where(st.d >= D * (1 - 1e-12), Status.SUCCESS,
+                 jnp.where(it >= cfg.max_steps, Status.MAX_STEPS, RUNNING))))).astype(jnp.int32)
+        return _with(st, it=it, hist=hist, count=count, status=status)
+
+    st = lax.while_loop(lambda s: s.status == RUNNING, step, st)
+    return st
+
+
+def _with(st: State, **kw) -> State:
+    return dataclasses.replace(st, **kw)
+
+

@@ -1,0 +1,129 @@
+"""ParaView output through meshio: an XDMF time series of the whole squeeze and a VTU of the
+final state.
+
+Coordinates are in the user's frame (``mesh.points + mesh.offset``) with z = 0; vectors get a
+zero z component so ParaView's "Warp By Vector" works directly.
+
+Point data written at every recorded row (``res`` rows: initial touch, each step, each event):
+
+=========================  =======  ============================================================
+name                       shape    meaning
+=========================  =======  ============================================================
+``displacement``           (n, 3)   displacement of every node [m] (see below)
+``boundary_displacement``  (n, 3)   recorded displacement of boundary nodes [m]; 0 inside
+``contact_force``          (n, 3)   force the fingertip exerts on the node [N]; 0 elsewhere
+``mode``                   (n,)     -1 interior node, 0 free, 1 stick, 2/3 slip (toward
+                                    larger/smaller polar angle)
+``finger``                 (n,)     1 or 2 for a node in contact with that finger, else 0
+``full_field``             (n,)     1 where ``displacement`` is the exact full field at this row
+``depth``                  (n,)     the row's squeeze depth [m] (the same at every node)
+=========================  =======  ============================================================
+
+The full displacement field. A result stores it only at the final depth. Linear elasticity
+with a fixed contact set is linear in the contact data but not in the depth across events, so
+rows are never interpolated. Instead, when the compliance operator is given (``op=`` i.e.
+``scene.operator()``), each row's field is rebuilt *exactly* from that row's recorded contact
+forces and boundary displacements (:func:`jaxsqueeze.views.row_displacement`), and
+``full_field`` is 1 everywhere. Without ``op`` only the final row carries the full field; at
+other rows ``displacement`` equals ``boundary_displacement`` (interior nodes 0) and
+``full_field`` is 0.
+
+Time. Several rows share a depth (events are resolved at a fixed depth), and ParaView merges
+equal time values, so the XDMF time value of row k is k itself; the depth is in the ``depth``
+field and in ``summary.json``.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from . import views
+
+
+def _pad3(a):
+    a = np.asarray(a, float)
+    return np.column_stack([a, np.zeros(len(a))])
+
+
+def _points3(mesh):
+    return _pad3(np.asarray(mesh.points, float) + np.asarray(mesh.offset, float))
+
+
+def row_point_data(res, mesh, row: int, op=None) -> dict:
+    """The point data dict of one recorded row (see the module docstring)."""
+    r = views._row(res, row)
+    n = mesh.n
+    B = np.asarray(mesh.boundary)
+    k_last = len(np.asarray(res.depth)) - 1
+    modes = np.asarray(res.modes[r]).astype(np.int32)
+    fg = np.asarray(res.finger[r]).astype(np.int32)
+    ub = np.zeros((n, 2))
+    ub[B] = np.asarray(res.boundary_displacement[r], float)
+    F = np.zeros((n, 2))
+    F[B] = np.where((modes > 0)[:, None], np.asarray(res.forces[r], float), 0.0)
+    mode = np.full(n, -1, np.int32)
+    mode[B] = modes
+    finger = np.zeros(n, np.int32)
+    finger[B] = np.where(modes > 0, fg + 1, 0)
+    if r == k_last and res.displacement is not None:
+        u, full = np.asarray(res.displacement, float), 1
+    elif op is not None and op.field is not None:
+        u, full = views.row_displacement(res, op, r), 1
+    else:
+        u, full = ub, 0
+    return dict(displacement=_pad3(u), boundary_displacement=_pad3(ub), contact_force=_pad3(F),
+                mode=mode, finger=finger, full_field=np.full(n, full, np.int32),
+                depth=np.full(n, float(res.depth[r])))
+
+
+def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
+    """Write ``<path_dir>/<name>.xdmf`` (+ ``.h5``): one time step per recorded row.
+
+    Args:
+        path_dir: output folder (created if missing).
+        res: squeeze result; mesh: its :class:`~jaxsqueeze.mesh.Mesh`.
+        op: optional compliance operator (``scene.operator()``) to write the exact full
+            displacement field at every row (see the module docstring).
+    Returns the path of the .xdmf file. Read it back with ``meshio.xdmf.TimeSeriesReader``.
+    """
+    import meshio
+
+    os.makedirs(path_dir, exist_ok=True)
+    path = os.path.join(path_dir, f"{name}.xdmf")
+    cells = [_cells(mesh)]
+    cwd = os.getcwd()
+    # meshio names the .h5 file after the .xdmf path; write from inside the folder so the
+    # reference in the .xdmf is relative and the pair can be moved together.
+    os.chdir(path_dir)
+    try:
+        with meshio.xdmf.TimeSeriesWriter(f"{name}.xdmf") as w:
+            w.write_points_cells(_points3(mesh), cells)
+            for k in range(len(np.asarray(res.depth))):
+                w.write_data(k, point_data=row_point_data(res, mesh, k, op))
+    finally:
+        os.chdir(cwd)
+    return path
+
+
+def write_final_vtu(path, res, mesh) -> str:
+    """Write the final state as one VTU (undeformed coordinates + point data as above;
+    use "Warp By Vector" on ``displacement`` to see the deformed shape)."""
+    import meshio
+
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    data = row_point_data(res, mesh, -1)
+    meshio.write(path, meshio.Mesh(_points3(mesh), [_cells(mesh)],
+                                   point_data=data))
+    return str(path)
+
+
+def _cells(mesh):
+    """Triangles of a solid mesh, or the closed polyline ("line" cells) of a band."""
+    import meshio
+
+    tri = np.asarray(mesh.triangles, np.int64)
+    if len(tri):
+        return meshio.CellBlock("triangle", tri)
+    return meshio.CellBlock("line", np.asarray(mesh.segments(), np.int64))

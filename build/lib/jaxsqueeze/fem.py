@@ -1,0 +1,206 @@
+"""Plane-stress FEM on constant-strain triangles (Section II) and the compliance builds (DESIGN 2.2).
+
+Internally the stiffness is assembled for E = 1 and thickness = 1 (``K_hat``); the physical
+matrix is ``E * thickness * K_hat`` [N/m]. Node positions enter scaled by the object length
+``L``, which leaves ``K_hat`` unchanged (CST stiffness is scale free in 2-D) but makes the
+rigid modes and the compliance O(1) (DESIGN 2.3).
+"""
+from __future__ import annotations
+
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from jax.experimental import sparse as jsparse
+from threadpoolctl import threadpool_limits
+
+from .material import Material
+from .mesh import Mesh
+from .operator import Compliance, FieldMap, rigid_modes
+
+METHODS = ("sparse", "dense", "spectral")
+
+
+# ----------------------------------------------------------------------------- element kernel
+def element_stiffness(xy: jax.Array, nu) -> jax.Array:
+    """Plane-stress CST stiffness (6, 6) of one triangle for E = 1, thickness = 1.
+
+    Args:
+        xy: (3, 2) vertex coordinates, counterclockwise (any length unit).
+        nu: Poisson's ratio.
+    Returns:
+        (6, 6) matrix for DOFs (x0, y0, x1, y1, x2, y2); energy (1) is ½ uᵀ k u.
+    """
+    x, y = xy[:, 0], xy[:, 1]
+    b = jnp.array([y[1] - y[2], y[2] - y[0], y[0] - y[1]])
+    c = jnp.array([x[2] - x[1], x[0] - x[2], x[1] - x[0]])
+    area = 0.5 * (b[0] * c[1] - b[1] * c[0])
+    z = jnp.zeros(3, xy.dtype)
+    Bm = jnp.stack([
+        jnp.stack([b, z], 1).reshape(6),
+        jnp.stack([z, c], 1).reshape(6),
+        jnp.stack([c, b], 1).reshape(6),
+    ]) / (2 * area)
+    D = jnp.array([[1.0, nu, 0.0], [nu, 1.0, 0.0], [0.0, 0.0, 0.5 * (1 - nu)]], xy.dtype) / (1 - nu**2)
+    return area * Bm.T @ D @ Bm
+
+
+@jax.jit
+def element_matrices(points: jax.Array, triangles: jax.Array, nu) -> jax.Array:
+    """All element stiffnesses (t, 6, 6) for E = 1, thickness = 1, lifted from the kernel."""
+    return jax.vmap(element_stiffness, in_axes=(0, None))(points[triangles], nu)
+
+
+def element_dofs(triangles) -> np.ndarray:
+    """(t, 6) global DOF indices, interleaved x, y."""
+    tri = np.asarray(triangles)
+    return np.stack([2 * tri, 2 * tri + 1], axis=2).reshape(-1, 6)
+
+
+def _coo(triangles):
+    dofs = element_dofs(triangles)
+    rows = np.repeat(dofs, 6, axis=1).ravel()
+    cols = np.tile(dofs, (1, 6)).ravel()
+    return rows, cols
+
+
+# ----------------------------------------------------------------------------- stiffness
+def stiffness(mesh: Mesh, material: Material) -> jsparse.BCOO:
+    """Global stiffness K (2n, 2n) [N/m] as a BCOO matrix, DOFs interleaved x0, y0, x1, ...
+
+    Duplicate entries (one per element sharing a DOF pair) are kept and sum on use.
+    """
+    ke = element_matrices(jnp.asarray(mesh.points), jnp.asarray(mesh.triangles), material.nu)
+    rows, cols = _coo(mesh.triangles)
+    data = (material.E * material.thickness) * ke.reshape(-1)
+    idx = jnp.asarray(np.stack([rows, cols], axis=1))
+    return jsparse.BCOO((data, idx), shape=(2 * mesh.n, 2 * mesh.n))
+
+
+def null_space(points) -> jax.Array:
+    """Normalized null-space basis (2n, 3) of K: w_x, w_y, w_r about the node centroid (Section II)."""
+    pts = jnp.asarray(points)
+    pts = pts - pts.mean(axis=0)
+    w = rigid_modes(pts)
+    return w / jnp.linalg.norm(w, axis=0)
+
+
+def _scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
+    with jax.enable_x64(True):   # the host-side build is always float64
+        ke = np.asarray(element_matrices(jnp.asarray(mesh.points, jnp.float64), jnp.asarray(mesh.triangles), nu))
+    rows, cols = _coo(mesh.triangles)
+    return sp.csc_matrix((ke.ravel(), (rows, cols)), shape=(2 * mesh.n, 2 * mesh.n))
+
+
+# ----------------------------------------------------------------------------- compliance builds
+def object_length(mesh: Mesh) -> float:
+    """Object length L [m] used for internal scaling: the larger bounding-box side."""
+    return float(np.max(np.ptp(mesh.points, axis=0)))
+
+
+def pinned_dofs(points_b: np.ndarray) -> np.ndarray:
+    """Three DOFs forming a statically determinate support on the boundary.
+
+    Both DOFs of boundary node 0, and the DOF of the boundary node farthest from it that is
+    perpendicular to the dominant direction between them. Returns boundary-DOF positions (3,).
+    """
+    d = points_b - points_b[0]
+    far = int(np.argmax(np.einsum("ij,ij->i", d, d)))
+    along_x = abs(d[far, 0]) >= abs(d[far, 1])
+    return np.array([0, 1, 2 * far + (1 if along_x else 0)])
+
+
+def compliance(mesh: Mesh, material: Material, method: str = "sparse") -> Compliance:
+    """Boundary compliance operator of a solid mesh (DESIGN 2.2), in scaled units.
+
+    Args:
+        mesh: the object.
+        material: E [Pa], nu, thickness [m]. E and thickness only set ``op.stiffness``.
+        method: "sparse" (scipy sparse LU of pinned K, solved for the boundary DOFs; default),
+            "dense" (JAX Cholesky of pinned dense K; differentiable in nu) or
+            "spectral" (eigendecomposition of dense K; the paper's Section III).
+    Returns:
+        A :class:`~jaxsqueeze.operator.Compliance` over the boundary nodes.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method={method!r} is not a compliance build; choose one of {METHODS}.")
+    L = object_length(mesh)
+    pts = mesh.points / L
+    b = np.asarray(mesh.boundary)
+    bdofs = np.stack([2 * b, 2 * b + 1], axis=1).reshape(-1)
+    pins = bdofs[pinned_dofs(pts[b])]
+    if method == "sparse":
+        G, fmap = _sparse_build(mesh, material.nu, pts, bdofs, pins)
+    else:
+        build = _dense_build if method == "dense" else _spectral_build
+        Gnb = build(jnp.asarray(pts), jnp.asarray(mesh.triangles), material.nu, jnp.asarray(bdofs), jnp.asarray(pins))
+        G = Gnb[bdofs]
+        fmap = None if isinstance(Gnb, jax.core.Tracer) else _matrix_field(np.asarray(Gnb), pts)
+    dt = jnp.asarray(G).dtype
+    return Compliance(
+        points=jnp.asarray(pts[b], dt), normals=jnp.asarray(mesh.normals, dt), G=jnp.asarray(G),
+        N=rigid_modes(jnp.asarray(pts[b], dt)), length=jnp.asarray(L, dt),
+        stiffness=jnp.asarray(material.E * material.thickness, dt), nodes=jnp.asarray(b),
+        method=method, loops=tuple(mesh.loops), field=fmap)
+
+
+def _matrix_field(Gnb: np.ndarray, pts: np.ndarray) -> FieldMap:
+    return FieldMap(lambda f: Gnb @ f, pts)
+
+
+def _dense_K(pts, triangles, nu):
+    n2 = 2 * pts.shape[0]
+    ke = element_matrices(pts, triangles, nu)
+    dofs = jnp.stack([2 * triangles, 2 * triangles + 1], axis=2).reshape(-1, 6)
+    return jnp.zeros((n2, n2), ke.dtype).at[dofs[:, :, None], dofs[:, None, :]].add(ke)
+
+
+@jax.jit
+def _dense_build(pts, triangles, nu, bdofs, pins):
+    """(2n, 2m) columns of the pinned generalized inverse at the boundary DOFs."""
+    K = _dense_K(pts, triangles, nu)
+    n2 = K.shape[0]
+    keep = jnp.ones(n2, bool).at[pins].set(False)
+    Kp = jnp.where(keep[:, None] & keep[None, :], K, 0.0) + jnp.diag(jnp.where(keep, 0.0, 1.0))
+    rhs = jnp.zeros((n2, bdofs.shape[0]), K.dtype).at[bdofs, jnp.arange(bdofs.shape[0])].set(1.0)
+    rhs = jnp.where(keep[:, None], rhs, 0.0)
+    chol = jax.scipy.linalg.cho_factor(Kp, lower=True)
+    return jax.scipy.linalg.cho_solve(chol, rhs)
+
+
+@jax.jit
+def _spectral_build(pts, triangles, nu, bdofs, pins):
+    """(2n, 2m) columns of the pseudo-inverse K⁺ = Σ v vᵀ/λ over the 2n−3 positive modes (eq. 3)."""
+    K = _dense_K(pts, triangles, nu)
+    lam, V = jnp.linalg.eigh(K)
+    lam, V = lam[3:], V[:, 3:]          # the three smallest are the rigid modes
+    return (V / lam) @ V[bdofs].T
+
+
+def _sparse_build(mesh: Mesh, nu, pts, bdofs, pins, chunk: int = 128):
+    K = _scipy_stiffness(mesh, float(nu))
+    n2 = K.shape[0]
+    keep = np.ones(n2, bool)
+    keep[pins] = False
+    D = sp.diags(keep.astype(float))
+    Kp = (D @ K @ D + sp.diags((~keep).astype(float))).tocsc()
+    lu = spla.splu(Kp, permc_spec="COLAMD")
+    G = np.empty((bdofs.size, bdofs.size))
+    # SuperLU's triangular solves are memory bound: extra BLAS threads only contend.
+    with threadpool_limits(1, "blas"):
+        for start in range(0, bdofs.size, chunk):
+            cols = np.arange(start, min(start + chunk, bdofs.size))
+            rhs = np.zeros((n2, cols.size))
+            rhs[bdofs[cols], np.arange(cols.size)] = keep[bdofs[cols]]
+            G[:, cols] = lu.solve(rhs)[bdofs]
+    G = 0.5 * (G + G.T)
+
+    def solve(f_b):
+        rhs = np.zeros(n2)
+        rhs[bdofs] = f_b
+        rhs[~keep] = 0.0
+        return lu.solve(rhs)
+
+    return G, FieldMap(solve, pts)

@@ -1,0 +1,50 @@
+"""Small dense solves for the squeeze loop that stay safe under ``vmap``.
+
+Why: jaxlib's CPU LAPACK kernels parallelise over a ``vmap`` batch on XLA's intra-op thread
+pool. Called from inside a ``lax.while_loop`` that already runs on that pool, the batched
+LU waits on itself: on a 2-core machine ``jax.vmap`` of a squeeze over three grasps
+deadlocked (``jax::ParallelBatchMap`` in ``LuDecomposition`` blocked forever). The functions
+here are ``custom_vmap``: a batch is solved one system at a time with ``lax.map``, so LAPACK
+never sees a batch dimension, and a batched result equals the loop of single solves.
+They stay forward-mode differentiable.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jax.custom_batching import custom_vmap
+
+NEUTRAL_RTOL = 1e-3   # truncation of lstsq: singular values below this fraction count as zero
+
+
+def _one_at_a_time(fn):
+    def rule(axis_size, in_batched, A, B):
+        A = A if in_batched[0] else jnp.broadcast_to(A, (axis_size,) + A.shape)
+        B = B if in_batched[1] else jnp.broadcast_to(B, (axis_size,) + B.shape)
+        return lax.map(lambda ab: fn(*ab), (A, B)), True
+    return rule
+
+
+@custom_vmap
+def solve(A: jax.Array, B: jax.Array) -> jax.Array:
+    """Solve A X = B for a small nonsingular (n, n) A; B is (n,) or (n, k)."""
+    return jnp.linalg.solve(A, B)
+
+
+@custom_vmap
+def lstsq(A: jax.Array, B: jax.Array) -> jax.Array:
+    """Least-change solution of A X = B with singular values below NEUTRAL_RTOL·σ_max dropped.
+
+    Directions A (almost) does not resist are left out of X, so they stay unexcited.
+    """
+    return jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B
+
+
+solve.def_vmap(_one_at_a_time(solve))
+lstsq.def_vmap(_one_at_a_time(lstsq))
+
+
+def inv(A: jax.Array) -> jax.Array:
+    """Inverse of a small nonsingular (n, n) matrix."""
+    return solve(A, jnp.eye(A.shape[0], dtype=A.dtype))

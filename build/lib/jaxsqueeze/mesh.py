@@ -1,0 +1,337 @@
+"""Triangle meshes of planar objects (Section II): container, validation, boundary, I/O."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A validated triangle mesh of a planar object.
+
+    Attributes:
+        points: (n, 2) float64 node positions [m], translated so the node centroid is at the
+            origin (Section II).
+        triangles: (t, 3) int64 node indices, each triangle counterclockwise.
+        boundary: (m,) int64 boundary node indices, loop by loop, outer loop first, then holes.
+            Every loop is ordered with the material on its left: the outer loop runs
+            counterclockwise, holes run clockwise.
+        loops: tuple of loop lengths (outer first), summing to m.
+        normals: (m, 2) outward unit normals at the boundary nodes (the normalized sum of
+            the unit normals of the two adjacent boundary edges; at a corner this is the
+            bisector).
+        offset: (2,) position of the node centroid in the user's original frame [m];
+            ``points + offset`` gives the original coordinates.
+    """
+
+    points: np.ndarray
+    triangles: np.ndarray
+    boundary: np.ndarray
+    loops: tuple
+    normals: np.ndarray
+    offset: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def m(self) -> int:
+        return int(self.boundary.shape[0])
+
+    @classmethod
+    def from_arrays(cls, points, triangles) -> "Mesh":
+        """Validate, orient and center a triangle mesh given in the user's frame.
+
+        Args:
+            points: (n, 2) node coordinates [m] in the user's frame.
+            triangles: (t, 3) integer node indices.
+
+        Nodes used by no triangle are dropped (the rest keep their order); a consistently
+        clockwise mesh is flipped to counterclockwise; points are translated so the node
+        centroid is at the origin (``offset`` keeps it). Boundary loops are chained from the
+        edges used by one triangle: outer loop (largest enclosed area) first, then holes by
+        decreasing enclosed area; each loop starts at the node seen from the loop's node
+        centroid in the direction closest to +x (ties: the smaller angle, then the smaller
+        index).
+
+        Raises:
+            ValueError: on bad shapes, non-finite coordinates, out-of-range indices,
+                degenerate or inverted triangles, duplicate nodes, non-manifold edges or
+                vertices, or a mesh in more than one piece. Messages use the caller's
+                node and triangle indices.
+        """
+        pts, tri = _check_arrays(points, triangles)
+        used = np.unique(tri)  # original index of each kept node
+        tri = np.searchsorted(used, tri)
+        pts = pts[used]
+        tri = _orient(pts, tri, used)
+        _check_duplicates(pts, used)
+        bnext = _boundary_edges(tri, used)
+        _check_connected(tri)
+        offset = pts.mean(axis=0)
+        pts = pts - offset
+        loops = _chain_loops(pts, bnext)
+        boundary = np.concatenate(loops)
+        normals = np.concatenate([_loop_normals(pts[lp]) for lp in loops])
+        arrays = [pts, tri.astype(np.int64), boundary.astype(np.int64), normals, offset]
+        for a in arrays:
+            a.setflags(write=False)
+        pts, tri, boundary, normals, offset = arrays
+        return cls(pts, tri, boundary, tuple(len(lp) for lp in loops), normals, offset)
+
+    def boundary_index(self, nodes) -> np.ndarray:
+        """Positions in ``boundary`` of mesh node indices ``nodes`` (any shape, int64)."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        lookup = np.full(self.n, -1, dtype=np.int64)
+        lookup[self.boundary] = np.arange(self.m)
+        bad = (nodes < 0) | (nodes >= self.n)
+        pos = np.where(bad, -1, lookup[np.clip(nodes, 0, self.n - 1)])
+        if np.any(pos < 0):
+            raise ValueError(f"nodes {_few(nodes[pos < 0])} are not boundary nodes of this mesh "
+                             f"(boundary nodes are Mesh.boundary; node indices run 0..{self.n - 1})")
+        return pos
+
+    def edge_length(self) -> float:
+        """Mean boundary edge length [m]."""
+        nxt = np.concatenate([np.roll(lp, -1) for lp in np.split(self.boundary, np.cumsum(self.loops)[:-1])])
+        return float(np.linalg.norm(self.points[nxt] - self.points[self.boundary], axis=1).mean())
+
+    def min_angle(self) -> float:
+        """Smallest interior angle over all triangles [degrees]."""
+        p = self.points[self.triangles]                      # (t, 3, 2)
+        a, b = np.roll(p, -1, axis=1) - p, np.roll(p, 1, axis=1) - p
+        cos = (a * b).sum(-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+        return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).min())
+
+
+def _few(items, k: int = 8) -> str:
+    """Short printable list of the first ``k`` items."""
+    items = [x.tolist() if isinstance(x, np.ndarray) else x for x in list(items)]
+    more = f" ... ({len(items)} in all)" if len(items) > k else ""
+    return ", ".join(str(x) for x in items[:k]) + more
+
+
+def _check_arrays(points, triangles):
+    """Shapes, finiteness and index range; returns float64 (n, 2) and int64 (t, 3)."""
+    pts = np.asarray(points, dtype=np.float64)
+    tri = np.asarray(triangles)
+    if pts.size == 0 or tri.size == 0:
+        raise ValueError(f"empty mesh: points {pts.shape}, triangles {tri.shape}; "
+                         "a mesh needs (n, 2) points and at least one (3,) triangle")
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must have shape (n, 2) (x, y per node); got {pts.shape}. "
+                         "Drop a z column with points[:, :2].")
+    if tri.ndim != 2 or tri.shape[1] != 3:
+        raise ValueError(f"triangles must have shape (t, 3) (three node indices per triangle); "
+                         f"got {tri.shape}")
+    if not np.issubdtype(tri.dtype, np.integer):
+        if not np.all(np.isfinite(tri)) or np.any(tri != np.round(tri)):
+            raise ValueError("triangles must hold integer node indices")
+    tri = tri.astype(np.int64)
+    bad = np.flatnonzero(~np.all(np.isfinite(pts), axis=1))
+    if bad.size:
+        raise ValueError(f"non-finite (NaN or inf) coordinates at nodes {_few(bad)}: "
+                         f"{_few(pts[bad])}; fix or remove these nodes")
+    bad = np.flatnonzero(np.any((tri < 0) | (tri >= len(pts)), axis=1))
+    if bad.size:
+        raise ValueError(f"node indices out of range 0..{len(pts) - 1} in triangles {_few(bad)}: "
+                         f"{_few(tri[bad])}; indices are 0-based")
+    return pts, tri
+
+
+def _signed_areas(pts, tri):
+    """Signed areas of triangles (t,) [m^2]; positive for counterclockwise."""
+    a, b, c = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
+    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+def _orient(pts, tri, used):
+    """Reject degenerate and inverted triangles; flip a clockwise mesh to counterclockwise."""
+    area = _signed_areas(pts, tri)
+    p = pts[tri]
+    mean_edge = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=2).mean(axis=1)
+    bad = np.flatnonzero(np.abs(area) <= 1e-12 * mean_edge**2)
+    if bad.size:
+        raise ValueError(f"degenerate (zero-area) triangles {_few(bad)} with nodes "
+                         f"{_few(used[tri[bad]])}; remove them or move their nodes apart")
+    # The majority orientation wins (ties: the sign of the total area); the rest are inverted.
+    sign = np.sign(np.sum(np.sign(area))) or np.sign(area.sum()) or 1.0
+    bad = np.flatnonzero(np.sign(area) != sign)
+    if bad.size:
+        raise ValueError(f"inverted triangle(s) {_few(bad)} with nodes {_few(used[tri[bad]])}: "
+                         f"their orientation is opposite to the rest of the mesh (folded elements); "
+                         "reorder their nodes or fix the node positions")
+    return tri if sign > 0 else tri[:, [0, 2, 1]]
+
+
+def _check_duplicates(pts, used):
+    """Reject two nodes closer than 1e-12 times the bounding-box diagonal."""
+    from scipy.spatial import cKDTree
+
+    tol = 1e-12 * float(np.linalg.norm(np.ptp(pts, axis=0)))
+    pairs = cKDTree(pts).query_pairs(r=tol, output_type="ndarray")
+    if len(pairs):
+        raise ValueError(f"duplicate nodes (same coordinates): node pairs {_few(used[pairs])} at "
+                         f"{_few(pts[pairs[:, 0]])}; merge them and renumber the triangles")
+
+
+def _edge_table(tri):
+    """Directed edges (3t, 2) of the triangles, the undirected edge id of each, and the
+    number of triangles using each undirected edge."""
+    directed = tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    lo, hi = directed.min(axis=1), directed.max(axis=1)
+    _, inverse, counts = np.unique(lo * (tri.max() + 1) + hi, return_inverse=True, return_counts=True)
+    return directed, inverse.ravel(), counts
+
+
+def _boundary_edges(tri, used):
+    """Check edge and vertex manifoldness; map each boundary node to the next one (dict)."""
+    directed, inverse, counts = _edge_table(tri)
+    bad = np.flatnonzero(counts > 2)
+    if bad.size:
+        tris = [np.flatnonzero(inverse == e) // 3 for e in bad[:8]]
+        nodes = [np.sort(used[directed[np.argmax(inverse == e)]]) for e in bad[:8]]
+        raise ValueError(f"non-manifold edges shared by more than 2 triangles: edges (nodes) "
+                         f"{_few(nodes)}, triangles {_few(tris)}; each edge may border at most "
+                         "two triangles")
+    # An interior edge must be traversed in opposite directions by its two triangles.
+    forward = np.bincount(inverse, weights=directed[:, 0] < directed[:, 1], minlength=len(counts))
+    bad = np.flatnonzero((counts == 2) & (forward != 1))
+    if bad.size:
+        tris = [np.flatnonzero(inverse == e) // 3 for e in bad[:8]]
+        raise ValueError(f"inverted triangle(s): triangle pairs {_few(tris)} lie on the same side of "
+                         "their shared edge (folded or overlapping elements); fix the node positions")
+    edges = directed[counts[inverse] == 1]
+    starts, n_out = np.unique(edges[:, 0], return_counts=True)
+    bad = starts[n_out > 1]
+    if bad.size:
+        raise ValueError(f"non-manifold (bow-tie) boundary vertices {_few(used[bad])}: the boundary "
+                         "passes through them more than once; split the node or fill the gap")
+    return dict(zip(edges[:, 0].tolist(), edges[:, 1].tolist()))
+
+
+def _check_connected(tri):
+    """Reject a mesh whose triangles form more than one edge-connected piece."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    t = len(tri)
+    _, inverse, counts = _edge_table(tri)
+    # Bipartite graph triangle <-> edge; its components give the triangle pieces.
+    rows = np.repeat(np.arange(t), 3)
+    size = t + len(counts)
+    graph = coo_matrix((np.ones(3 * t), (rows, t + inverse)), shape=(size, size))
+    k, label = connected_components(graph, directed=False)
+    if k > 1:
+        sizes = np.bincount(label[:t])
+        pieces = [f"{s} triangles incl. triangle {int(np.argmax(label[:t] == i))}"
+                  for i, s in enumerate(sizes)]
+        raise ValueError(f"mesh has {k} pieces not connected through shared edges "
+                         f"({_few(pieces, 4)}); mesh one object at a time")
+
+
+def _chain_loops(pts, bnext):
+    """Boundary loops as node-index arrays, outer first, each at its deterministic start."""
+    loops, left = [], set(bnext)
+    while left:
+        start = min(left)
+        loop = [start]
+        node = bnext[start]
+        while node != start:
+            loop.append(node)
+            node = bnext[node]
+        left.difference_update(loop)
+        loops.append(np.array(loop, dtype=np.int64))
+    areas = np.array([_loop_area(pts[lp]) for lp in loops])
+    order = np.lexsort((np.array([lp.min() for lp in loops]), -np.abs(areas)))
+    return [_loop_start(pts, loops[i]) for i in order]
+
+
+def _loop_area(p):
+    """Signed area enclosed by a closed polygon p (k, 2) [m^2]; positive if CCW."""
+    q = np.roll(p, -1, axis=0)
+    return 0.5 * float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
+
+
+def _loop_start(pts, loop):
+    """Roll ``loop`` to start at the node in direction closest to +x from its node centroid."""
+    d = pts[loop] - pts[loop].mean(axis=0)
+    ang = np.arctan2(d[:, 1], d[:, 0])
+    first = np.lexsort((loop, ang, np.round(np.abs(ang), 9)))[0]
+    return np.roll(loop, -first)
+
+
+def _loop_normals(p):
+    """Outward unit normals (k, 2) at the nodes of a loop p (k, 2) with material on its left."""
+    e = np.roll(p, -1, axis=0) - p
+    n = np.stack([e[:, 1], -e[:, 0]], axis=1) / np.linalg.norm(e, axis=1, keepdims=True)
+    s = n + np.roll(n, 1, axis=0)
+    norm = np.linalg.norm(s, axis=1, keepdims=True)
+    return np.where(norm > 1e-12, s / np.maximum(norm, 1e-300), n)
+
+
+def read_mesh(path) -> Mesh:
+    """Read a planar triangle mesh from any file format meshio knows (.msh, .vtu, .xdmf, ...).
+
+    All ``triangle`` cell blocks are kept, other cells ignored; coordinates are x, y [m]
+    (a z column must be zero). Unused nodes (e.g. of line cells only) are dropped.
+
+    Raises:
+        ValueError: no triangle cells in the file, or nodes off the z = 0 plane, or any
+            :meth:`Mesh.from_arrays` error.
+    """
+    import meshio
+
+    try:
+        m = meshio.read(path)
+    except (OSError, meshio.ReadError):
+        raise
+    except Exception as exc:  # meshio fails obscurely on empty cell blocks
+        raise ValueError(f"could not read a triangle mesh from {path}: {exc!r}. A mesh file needs at least one "
+                         "triangle cell block with nodes.") from exc
+    blocks = [c.data for c in m.cells if c.type == "triangle"]
+    if not blocks:
+        found = sorted({c.type for c in m.cells}) or ["no cells"]
+        raise ValueError(f"no triangle cells in {path}; found: {', '.join(found)}. "
+                         "jaxsqueeze needs linear 3-node triangles (mesh with element order 1)")
+    pts = np.asarray(m.points, dtype=np.float64)
+    if pts.ndim == 2 and pts.shape[1] == 3:
+        xy = pts[:, :2]
+        finite = xy[np.all(np.isfinite(xy), axis=1)]
+        scale = float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
+        bad = np.flatnonzero(np.abs(pts[:, 2]) > 1e-9 * max(scale, 1e-300))
+        if bad.size:
+            raise ValueError(f"mesh in {path} is not planar: nodes {_few(bad)} have z = "
+                             f"{_few(pts[bad, 2])} (must be 0); jaxsqueeze needs meshes in the z = 0 plane")
+        pts = xy
+    return Mesh.from_arrays(pts, np.concatenate(blocks, axis=0))
+
+
+def write_mesh(path, mesh: Mesh, point_data=None, file_format=None) -> None:
+    """Write ``mesh`` with meshio, in the user's frame (``points + offset``, z = 0 added).
+
+    Args:
+        path: output file; the format follows the suffix unless ``file_format`` is given.
+            ``.msh`` files default to ``"gmsh22"`` (which keeps point data).
+        mesh: the mesh.
+        point_data: optional dict of extra per-node arrays, each (n,) or (n, k).
+        file_format: optional meshio format name.
+
+    The point data always includes ``"boundary"`` (n,) int: 1 at boundary nodes, else 0.
+    """
+    import meshio
+
+    pts = np.column_stack([mesh.points + mesh.offset, np.zeros(mesh.n)])
+    flag = np.zeros(mesh.n, dtype=np.int64)
+    flag[mesh.boundary] = 1
+    data = {"boundary": flag, **{k: np.asarray(v) for k, v in (point_data or {}).items()}}
+    if file_format is None and str(path).lower().endswith(".msh"):
+        file_format = "gmsh22"
+    cell_data = {}
+    if file_format is not None and file_format.startswith("gmsh"):
+        tags = np.ones(len(mesh.triangles), dtype=np.int64)
+        cell_data = {"gmsh:physical": [tags], "gmsh:geometrical": [tags]}
+    out = meshio.Mesh(pts, [("triangle", np.asarray(mesh.triangles))], point_data=data, cell_data=cell_data)
+    meshio.write(path, out, file_format=file_format)

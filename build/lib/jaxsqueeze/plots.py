@@ -1,0 +1,341 @@
+"""Matplotlib figures of a squeeze (the paper's Figs. 4–8).
+
+Every function returns a :class:`matplotlib.figure.Figure` built directly (no pyplot, no
+backend switch), so the module is safe to import anywhere; show a figure in a notebook by
+leaving it as the cell's value, or save it with ``fig.savefig(path)``. Lengths are shown in
+millimetres in the user's frame (``mesh.points + mesh.offset``).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle
+from matplotlib.tri import Triangulation
+
+from . import views
+from .views import FREE, SLIP_POS, STICK
+
+MM = 1e3
+STICK_COLOR = "tab:blue"
+SLIP_COLOR = "tab:red"
+FINGER_COLORS = ("tab:green", "tab:purple")
+EVENT_MARKERS = {"A": ("o", "tab:green"), "B": ("x", "black"), "C": ("^", "tab:red"), "D": ("v", "tab:blue")}
+DPI = 110
+
+
+def _boundary_loops(mesh):
+    return np.split(np.arange(mesh.m), np.cumsum(mesh.loops)[:-1])
+
+
+def _title_state(res, row):
+    r = views._row(res, row)
+    rel = views.relative_depth(res)[r]
+    return f"d = {float(res.depth[r]) * MM:.2f} mm ({100 * rel:.1f} %)"
+
+
+def _is_band(mesh) -> bool:
+    return len(np.asarray(mesh.triangles)) == 0
+
+
+def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=None, title=None,
+                  show_nodes=True, details=True, legend=True, forces=None) -> Figure:
+    """Deformed object, fingertips and contact modes at one recorded row (Fig. 4).
+
+    Draws the undeformed outline (dashed), the deformed mesh (light triangles; the full
+    field is known at the final row, or pass ``displacement`` (n, 2) e.g. from
+    :func:`jaxsqueeze.views.row_displacement`; otherwise only the deformed boundary), the
+    fingertips, and the contact nodes: stick (blue dots) and slip (red dots with an arrow
+    along the fingertip in the slip direction).
+
+    Args:
+        zoom: optional ((xmin, xmax), (ymin, ymax)) in mm, or a centre (x, y) [m, user frame]
+            with a half width: ``((x, y), half)``.
+        ax: draw into an existing Axes (the Figure returned is its figure).
+        details: with a new figure (no ``ax`` or ``zoom``), add two close-ups of the
+            contact regions, one per finger, to the right of the whole object.
+        forces: draw each finger's total contact force as an arrow at its contact (black;
+            the longer arrow is a quarter of the object's size). Default: on for a band
+            (:class:`~jaxsqueeze.band.Band`, drawn as its deformed polyline through the
+            nodes), off for a mesh.
+    """
+    if forces is None:
+        forces = _is_band(mesh)
+    r = views._row(res, row)
+    last = r == len(np.asarray(res.depth)) - 1
+    if ax is None and zoom is None and details:
+        fig = Figure(figsize=(11, 7), dpi=DPI, layout="constrained")
+        gs = fig.add_gridspec(2, 2, width_ratios=[1.6, 1.0])
+        ax = fig.add_subplot(gs[:, 0])
+        C = np.asarray(res.centres[r], float) + np.asarray(mesh.offset, float)
+        h = 1.6 * float(res.radius)
+        for f in (0, 1):
+            sub = fig.add_subplot(gs[f == 0, 1])   # finger 2 (top of the object) on top
+            # centre the close-up between the fingertip centre and its contact
+            away = C[f] - np.asarray(mesh.offset, float)
+            away = away / max(np.linalg.norm(away), 1e-300)
+            plot_deformed(res, mesh, r, displacement, zoom=(C[f] - away * float(res.radius), h), ax=sub,
+                          title=f"finger {f + 1} (close-up)", legend=False, forces=forces)
+        plot_deformed(res, mesh, r, displacement, ax=ax, title=title, show_nodes=show_nodes, legend="figure",
+                      forces=forces)
+        return fig
+    if ax is None:
+        fig = Figure(figsize=(8, 6.5), dpi=DPI, layout="constrained")
+        ax = fig.add_subplot()
+    else:
+        fig = ax.figure
+    off = np.asarray(mesh.offset, float)
+    P = np.asarray(mesh.points, float) + off
+    B = np.asarray(mesh.boundary)
+    ub = np.asarray(res.boundary_displacement[r], float)
+    if displacement is None and last and res.displacement is not None:
+        displacement = np.asarray(res.displacement, float)
+    # undeformed outline
+    for lp in _boundary_loops(mesh):
+        q = P[B[lp]]
+        q = np.vstack([q, q[:1]]) * MM
+        ax.plot(q[:, 0], q[:, 1], "--", color="0.45", lw=1.0, zorder=1)
+    # deformed mesh or boundary
+    if displacement is not None and not _is_band(mesh):
+        X = P + np.asarray(displacement, float)
+        tri = Triangulation(X[:, 0] * MM, X[:, 1] * MM, np.asarray(mesh.triangles))
+        ax.triplot(tri, color="0.75", lw=0.4, zorder=2)
+    for lp in _boundary_loops(mesh):
+        q = P[B[lp]] + ub[lp]
+        q = np.vstack([q, q[:1]]) * MM
+        ax.plot(q[:, 0], q[:, 1], "-", color="0.15", lw=1.2, zorder=3)
+    # fingertips
+    C = np.asarray(res.centres[r], float) + off
+    rad = float(res.radius)
+    for f in (0, 1):
+        ax.add_patch(Circle(C[f] * MM, rad * MM, facecolor=FINGER_COLORS[f], alpha=0.18,
+                            edgecolor=FINGER_COLORS[f], lw=1.5, zorder=4))
+        ax.plot(*(C[f] * MM), "+", color=FINGER_COLORS[f], ms=8, zorder=4)
+        if zoom is None:   # label beyond the fingertip, away from the object
+            away = C[f] - off
+            away = away / max(np.linalg.norm(away), 1e-300)
+            at = (C[f] + away * 1.6 * rad) * MM
+            ax.text(*at, f"finger {f + 1}", ha="center", va="center", fontsize=9,
+                    color=FINGER_COLORS[f], zorder=5)
+            ax.update_datalim([at + away * 0.5 * rad * MM])
+    # contact nodes
+    modes = np.asarray(res.modes[r])
+    fg = np.asarray(res.finger[r])
+    theta = np.asarray(res.theta[r], float)
+    alpha = np.asarray(res.alpha[r], float)
+    X_b = (P[B] + ub) * MM
+    stick = modes == STICK
+    slip = modes >= SLIP_POS
+    if show_nodes:
+        ax.plot(X_b[stick, 0], X_b[stick, 1], "o", color=STICK_COLOR, ms=4.5, zorder=6,
+                label=f"stick ({int(stick.sum())})")
+        ax.plot(X_b[slip, 0], X_b[slip, 1], "o", color=SLIP_COLOR, ms=4.5, zorder=6,
+                label=f"slip ({int(slip.sum())}), arrow: slip direction")
+        if slip.any():
+            k = np.flatnonzero(slip)
+            world = theta[k] + alpha[fg[k]]
+            sign = np.where(modes[k] == SLIP_POS, 1.0, -1.0)
+            t = sign[:, None] * np.stack([-np.sin(world), np.cos(world)], axis=1)
+            L = 0.3 * rad * MM
+            if zoom is not None:   # arrows a tenth of the close-up's width
+                L = 0.1 * float(np.diff(ax.get_xlim())[0]) if np.ndim(zoom[0]) != 1 or np.ndim(zoom[1]) != 0 \
+                    else 0.2 * float(zoom[1]) * MM
+            ax.quiver(X_b[k, 0], X_b[k, 1], t[:, 0] * L, t[:, 1] * L, color=SLIP_COLOR, angles="xy",
+                      scale_units="xy", scale=1, width=0.006, zorder=7)
+    if forces:
+        Fr = np.asarray(res.forces[r], float)
+        on = modes > FREE
+        tot = [Fr[on & (fg == f)].sum(axis=0) for f in (0, 1)]
+        big = max(max(np.linalg.norm(t) for t in tot), 1e-300)
+        scale = 0.25 * float(np.max(np.ptp(P, axis=0))) / big
+        for f in (0, 1):
+            k = np.flatnonzero(on & (fg == f))
+            if not k.size or not np.linalg.norm(tot[f]) > 0:
+                continue
+            at = X_b[k].mean(axis=0)
+            ax.quiver(at[0], at[1], tot[f][0] * scale * MM, tot[f][1] * scale * MM, color="black", angles="xy",
+                      scale_units="xy", scale=1, width=0.005, zorder=8)
+            if zoom is None:
+                ax.text(*(at + 0.5 * tot[f] * scale * MM), f" {np.linalg.norm(tot[f]):.3g} N", fontsize=8,
+                        va="bottom", zorder=8)
+    handles, labels = ax.get_legend_handles_labels()
+    if forces:
+        handles.append(Line2D([], [], color="black", marker=r"$\rightarrow$", ls="", ms=12))
+        labels.append("contact force of each finger")
+    handles += [Line2D([], [], ls="--", color="0.45"), Line2D([], [], color="0.15")]
+    labels += ["undeformed outline", "deformed outline"]
+    if legend == "figure":
+        fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=9)
+    elif legend:
+        ax.legend(handles, labels, loc="best", fontsize=8, framealpha=0.9)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    if zoom is not None:
+        if np.ndim(zoom[0]) == 1 and np.size(zoom[0]) == 2 and np.ndim(zoom[1]) == 0:
+            (cx, cy), h = zoom
+            ax.set_xlim((cx - h) * MM, (cx + h) * MM)
+            ax.set_ylim((cy - h) * MM, (cy + h) * MM)
+        else:
+            ax.set_xlim(*zoom[0])
+            ax.set_ylim(*zoom[1])
+    else:
+        ax.autoscale_view()
+    status = res.outcome.name if last else "in progress"
+    ax.set_title(title or f"Deformed object at {_title_state(res, r)} — {status}")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    return fig
+
+
+def default_rows(res, count: int = 4) -> list[int]:
+    """Rows nearest to evenly spaced fractions of the final depth (1/count ... 1)."""
+    depth = np.asarray(res.depth, float)
+    targets = depth[-1] * np.arange(1, count + 1) / count
+    rows = sorted({int(np.argmin(np.abs(depth - t))) for t in targets})
+    return [r for r in rows if depth[r] > 0] or [len(depth) - 1]
+
+
+def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> Figure:
+    """Fig. 5 analogue: force density (top) and force direction (bottom) against arc length
+    along the contact, finger 1 (left) and finger 2 (right), one curve per selected row.
+
+    ``rows`` defaults to the rows nearest 25, 50, 75 and 100 % of the final depth. Markers
+    are nodal values (filled: stick, open: slip); lines are cubic splines through them.
+    """
+    rows = default_rows(res) if rows is None else [views._row(res, r) for r in rows]
+    fig = Figure(figsize=(10, 7), dpi=DPI, layout="constrained")
+    axs = fig.subplots(2, 2, sharex="col")
+    cmap = _cmap(len(rows))
+    for f in (0, 1):
+        for c, r in zip(cmap, rows):
+            p = views.force_profile(res, r, f, mesh=mesh)
+            if not len(p.s):
+                continue
+            s = p.s * MM
+            ang = np.degrees(p.angle) if degrees else p.angle
+            label = f"d = {100 * p.relative_depth:.1f} %"
+            for ax, y in ((axs[0, f], p.density), (axs[1, f], ang)):
+                if smooth:
+                    xs, ys = views.spline(s, y)
+                    ax.plot(xs, ys, "-", color=c, lw=1.5, label=label)
+                else:
+                    ax.plot(s, y, "-", color=c, lw=1.5, label=label)
+                st = p.modes == STICK
+                ax.plot(s[st], y[st], "o", color=c, ms=4)
+                ax.plot(s[~st], y[~st], "o", mfc="white", mec=c, ms=4)
+        axs[0, f].set_title(f"Finger {f + 1}")
+        axs[0, f].set_ylabel("force density [N/m]")
+        axs[1, f].set_ylabel("force direction [deg]" if degrees else "force direction [rad]")
+        axs[1, f].set_xlabel("arc length along fingertip s [mm]")
+        for ax in axs[:, f]:
+            ax.grid(True, lw=0.3, alpha=0.6)
+    handles = [Line2D([], [], color=c, lw=1.5) for c in cmap]
+    labels = [f"d = {100 * views.relative_depth(res)[r]:.1f} %" for r in rows]
+    handles += [Line2D([], [], ls="", marker="o", color="0.3"),
+                Line2D([], [], ls="", marker="o", mfc="white", mec="0.3")]
+    labels += ["stick node", "slip node"]
+    fig.legend(handles, labels, fontsize=9, loc="outside right upper")
+    fig.suptitle("Force profile (relative squeeze depth d / D0)")
+    return fig
+
+
+def plot_sliding_profile(res, degrees=True) -> Figure:
+    """Fig. 6 analogue: polar angle of every contact node against relative depth, per finger.
+
+    Grey-blue line segments: the node sticks (its angle stays fixed); red: it slides.
+    Markers: C (stick→slip, ▲) and D (slip→stick, ▼) events.
+    """
+    fig = Figure(figsize=(10, 5.5), dpi=DPI, layout="constrained")
+    axs = fig.subplots(1, 2)
+    ev = views.event_table(res)
+    for f, ax in zip((0, 1), axs):
+        sp = views.sliding_profile(res, f)
+        x = 100 * sp.relative_depth
+        th = np.degrees(sp.theta) if degrees else sp.theta
+        for c in range(len(sp.nodes)):
+            y, md = th[:, c], sp.modes[:, c]
+            seg = np.stack([np.stack([x[:-1], y[:-1]], 1), np.stack([x[1:], y[1:]], 1)], 1)
+            ok = np.isfinite(seg).all(axis=(1, 2))
+            sl = md[1:] >= SLIP_POS
+            for mask, color, lw in ((ok & ~sl, STICK_COLOR, 1.0), (ok & sl, SLIP_COLOR, 1.8)):
+                if mask.any():
+                    ax.add_collection(LineCollection(seg[mask], colors=color, linewidths=lw))
+        for e in ev:
+            if e["finger"] != f + 1 or e["kind"] not in "CD":
+                continue
+            c = np.flatnonzero(sp.nodes == e["node"])
+            if not c.size:
+                continue
+            k = int(np.argmin(np.abs(sp.depth - e["depth"])))
+            mk, col = EVENT_MARKERS[e["kind"]]
+            ax.plot(100 * e["relative_depth"], th[k, c[0]], mk, color=col, ms=6, mec="k", mew=0.5)
+        ax.autoscale_view()
+        ax.set_xlabel("relative squeeze depth d / D0 [%]")
+        ax.set_ylabel("polar angle of contact node [deg]" if degrees else "polar angle [rad]")
+        ax.set_title(f"Finger {f + 1}: {len(sp.nodes)} nodes touched")
+        ax.grid(True, lw=0.3, alpha=0.6)
+    axs[1].legend([Line2D([], [], color=STICK_COLOR), Line2D([], [], color=SLIP_COLOR, lw=1.8),
+                   Line2D([], [], ls="", marker="^", color=EVENT_MARKERS["C"][1], mec="k"),
+                   Line2D([], [], ls="", marker="v", color=EVENT_MARKERS["D"][1], mec="k")],
+                  ["sticking", "sliding", "event C (stick→slip)", "event D (slip→stick)"],
+                  fontsize=8, loc="best")
+    fig.suptitle("Sliding profile: polar angle about the fingertip centre")
+    return fig
+
+
+def plot_events(res) -> Figure:
+    """Timeline of contact events: depth on x, mesh node on y, one panel per finger and one
+    marker per kind (A ●, B ×, C ▲, D ▼)."""
+    fig = Figure(figsize=(9, 6), dpi=DPI, layout="constrained")
+    axs = fig.subplots(2, 1, sharex=True)
+    ev = views.event_table(res)
+    for f, ax in zip((2, 1), axs):          # finger 2 (top of the object) on top
+        for kind, (mk, col) in EVENT_MARKERS.items():
+            sel = [e for e in ev if e["kind"] == kind and e["finger"] == f]
+            if sel:
+                ax.plot([e["depth"] * MM for e in sel], [e["node"] for e in sel], mk, ls="",
+                        color=col, ms=7, label=f"{kind}: {views.EVENT_MEANING[kind]} ({len(sel)})")
+        ax.set_ylabel(f"finger {f}: mesh node")
+        ax.grid(True, lw=0.3, alpha=0.6)
+        if any(e["finger"] == f for e in ev):
+            ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        else:
+            ax.text(0.5, 0.5, "no events", transform=ax.transAxes, ha="center")
+    axs[1].set_xlabel("squeeze depth d [mm]")
+    axs[1].set_xlim(0, float(np.asarray(res.depth)[-1]) * MM * 1.02)
+    seq = "".join(e["kind"] for e in ev)
+    counts = ", ".join(f"{k}: {seq.count(k)}" for k in "ABCD")
+    fig.suptitle(f"Contact events ({len(ev)} in all; {counts})")
+    return fig
+
+
+def _cmap(k):
+    from matplotlib import colormaps
+
+    cm = colormaps["viridis"]
+    return [cm(v) for v in np.linspace(0.0, 0.85, max(k, 1))]
+
+
+def save_all(res, scene, outdir) -> dict:
+    """Write deformed.png, force_profile.png, sliding_profile.png and events.png to ``outdir``
+    (for a band also cones.png, :func:`jaxsqueeze.cones.plot_cone_rotation`).
+
+    Returns {name: path}.
+    """
+    os.makedirs(outdir, exist_ok=True)
+    mesh = scene.mesh
+    figs = dict(deformed=plot_deformed(res, mesh), force_profile=plot_force_profile(res, mesh=mesh),
+                sliding_profile=plot_sliding_profile(res), events=plot_events(res))
+    if _is_band(mesh) and scene.friction_model == "coulomb":
+        from .cones import plot_cone_rotation
+
+        figs["cones"] = plot_cone_rotation(res, scene)      # Fig. 3: friction-cone rotation
+    out = {}
+    for name, fig in figs.items():
+        path = os.path.join(outdir, f"{name}.png")
+        fig.savefig(path)
+        out[name] = path
+    return out

@@ -1,0 +1,521 @@
+"""TOML scene files: one file describes one squeeze (``jaxsqueeze run SCENE.toml``).
+
+Schema (lengths in metres, forces in newtons, angles in radians; every key not marked
+optional is required; unknown keys, at any level, are errors)::
+
+    title = "foam square"          # optional, free text
+
+    [object]                       # exactly one of `shape` / `mesh_file`
+    shape = "rectangle"            # rectangle | disk | ellipse | annulus | polygon
+    width = 0.1                    #   rectangle: width, height
+    height = 0.1                   #   disk: radius;  ellipse: a, b;  annulus: r_outer, r_inner
+                                   #   polygon: vertices = [[x, y], ...], holes = [[[x, y], ...]] (optional)
+    center = [0.0, 0.0]            #   optional (not for polygon)
+    max_edge = 0.004               #   target edge length (built-in shapes only)
+    refine_edge = 0.001            #   optional: edge length near the grip points (needs grip.points)
+    refine_radius = 0.008          #   optional: radius of the fully refined zone (default 2 max_edge)
+    # mesh_file = "part.msh"       # instead of `shape`: any meshio format with triangles,
+                                   #   path relative to this TOML file; z must be 0
+
+    # --- or a band (ring-like object, Section V-A; jaxsqueeze.band) instead of shape/mesh_file:
+    # band = "heart"               # heart | leaf | circle (jaxsqueeze.curves)
+    # size = 0.08                  #   heart: width; leaf: length (its width is size/2, tip
+                                   #   radius size/40); circle: diameter [m]
+    # nodes = 128                  #   number of band nodes m (equal arc-length spacing)
+    # width = 0.0005               #   optional: wall thickness in the plane w [m] (default 0.5 mm)
+    # height = 0.005               #   optional: band height out of the plane h [m] (default
+                                   #   material.thickness if given, else 5 mm)
+    # A band's frame is its curve's: the heart and leaf are centred on their bounding box, the
+    # circle on the origin; grip.points are in that frame. For a band, material.nu is ignored
+    # (optional) and material.thickness is optional (it must equal object.height if both are
+    # given); squeeze.contact defaults to "point"; --max-edge / --refine-edge do not apply.
+
+    [material]
+    E = 1.0e5                      # Young's modulus [Pa] > 0
+    nu = 0.3                       # Poisson's ratio, -1 < nu <= 0.5
+    thickness = 0.0254             # plate thickness [m] > 0
+
+    [fingers]
+    radius = 0.01                  # fingertip radius [m] > 0
+    # rotation = [[0.0], [0.0]]    # optional: alpha_1(d), alpha_2(d) polynomial coefficients
+                                   #   in d [m], highest power first, one row per finger
+
+    [grip]                         # exactly one of `nodes` / `points`
+    points = [[-0.005, -0.05], [0.005, 0.05]]   # finger 1 (still), finger 2 (moving): the
+                                   #   nearest boundary nodes to these points (user frame)
+    # nodes = [12, 57]             # or: mesh node indices on the boundary
+
+    [squeeze]
+    depth = 0.015                  # target squeeze depth [m] > 0; or instead:
+    # relative_depth = 0.10        #   depth as a fraction rho of the initial grip distance
+                                   #   (the paper's rho, Section V-A), 0 < rho < 1
+    friction = 0.5                 # optional, Coulomb mu >= 0 (default 0.5)
+    friction_model = "coulomb"     # optional: coulomb | frictionless | stick
+    contact = "segment"            # optional: segment | point (default: point for a band)
+    method = "sparse"              # optional: sparse | dense | spectral
+
+    [accuracy]                     # optional table; every key optional (see jaxsqueeze.Settings)
+    step = 0.0003                  # squeeze step [m] (default depth / 50)
+    event_tol = 3e-8               # event bracket width [m] (default step * 1e-4)
+    newton_tol = 1e-11             # slip-angle Newton tolerance [rad]
+    gap_tol = 1e-10                # penetration tolerance for event A [m]
+    capacity = 64                  # contact slots
+    max_steps = 400                # loop iteration bound
+    max_events = 256               # event log size
+    newton_iters = 30
+    bisect_iters = 40
+    precision = "float64"          # float64 | float32 (the CLI sets JAX's precision from it)
+
+Every problem raises :class:`SceneFileError` whose ``key`` names the offending entry
+(``material.nu``, ``grip.points``, ...), so the message reads ``material.nu: ...``.
+The library's own validation (``Material``, ``Scene``, ``shapes``) is reused and its
+``ValueError`` is re-raised with the key that caused it.
+
+Loading builds the mesh and validates everything (grip on the boundary, the initial
+segment inside both friction cones) with numpy only: no JAX array is created, so a caller
+can still choose JAX's precision afterwards (:func:`load` then ``spec.precision``).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .engine import CONE_SLACK
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+SHAPES = {
+    "rectangle": ("width", "height"),
+    "disk": ("radius",),
+    "ellipse": ("a", "b"),
+    "annulus": ("r_outer", "r_inner"),
+    "polygon": ("vertices",),
+}
+BANDS = ("heart", "leaf", "circle")
+BAND_KEYS = {"band": True, "size": True, "nodes": True, "width": False, "height": False}
+SHAPE_OPTIONAL = {"rectangle": ("center",), "disk": ("center",), "ellipse": ("center",),
+                  "annulus": ("center",), "polygon": ("holes",)}
+MESH_KEYS = ("max_edge", "refine_edge", "refine_radius")
+TABLES = {
+    "object": None,   # checked separately (depends on the shape)
+    "material": {"E": True, "nu": True, "thickness": True},
+    "fingers": {"radius": True, "rotation": False},
+    "grip": {"nodes": False, "points": False},
+    "squeeze": {"depth": False, "relative_depth": False, "friction": False, "friction_model": False, "contact": False, "method": False},
+    "accuracy": {"step": False, "event_tol": False, "newton_tol": False, "gap_tol": False, "capacity": False,
+                 "max_steps": False, "max_events": False, "newton_iters": False, "bisect_iters": False,
+                 "precision": False},
+}
+REQUIRED_TABLES = ("object", "material", "fingers", "grip", "squeeze")
+TOP_KEYS = ("title",)
+PRECISIONS = ("float64", "float32")
+METHODS = ("sparse", "dense", "spectral")
+
+
+class SceneFileError(ValueError):
+    """A bad scene file. ``key`` is the dotted name of the offending entry (or ``"file"``)."""
+
+    def __init__(self, key: str, message: str):
+        self.key = key
+        self.message = message
+        super().__init__(f"{key}: {message}")
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """A loaded scene file: the :class:`~jaxsqueeze.Scene`, the precision it asks for, its
+    title and path, and the raw TOML data."""
+
+    scene: Any
+    precision: str
+    title: str
+    path: str
+    data: dict
+
+
+# ----------------------------------------------------------------------------- value checks
+def _describe(v) -> str:
+    if isinstance(v, str):
+        return f"the string {v!r}"
+    if isinstance(v, bool):
+        return f"the boolean {str(v).lower()}"
+    if isinstance(v, dict):
+        return "a table"
+    if isinstance(v, list):
+        return "an array"
+    return repr(v)
+
+
+def _number(key, v, positive=False, integer=False):
+    if integer:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise SceneFileError(key, f"expected an integer, got {_describe(v)}")
+        if v < 1:
+            raise SceneFileError(key, f"expected a positive integer, got {v}")
+        return v
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise SceneFileError(key, f"expected a number, got {_describe(v)}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise SceneFileError(key, f"expected a finite number, got {v}")
+    if positive and v <= 0:
+        raise SceneFileError(key, f"expected a number > 0, got {v}")
+    return v
+
+
+def _points(key, v, count=None, min_count=1):
+    what = f"{count} points [[x, y], ...]" if count else "a list of points [[x, y], ...]"
+    if not isinstance(v, list) or not all(isinstance(p, list) and len(p) == 2 for p in v):
+        raise SceneFileError(key, f"expected {what}, got {_describe(v)}")
+    if count is not None and len(v) != count:
+        raise SceneFileError(key, f"expected {what}, got {len(v)} point(s)")
+    if len(v) < min_count:
+        raise SceneFileError(key, f"expected at least {min_count} points, got {len(v)}")
+    return np.array([[_number(f"{key}[{i}]", x) for x in p] for i, p in enumerate(v)], float)
+
+
+def _choice(key, v, options):
+    if not isinstance(v, str) or v not in options:
+        raise SceneFileError(key, f"expected one of {', '.join(repr(o) for o in options)}, got {_describe(v)}")
+    return v
+
+
+def _table(key, v):
+    if not isinstance(v, dict):
+        raise SceneFileError(key, f"expected a table [{key}], got {_describe(v)}")
+    return v
+
+
+def _unknown(prefix, table, allowed):
+    for k in table:
+        if k not in allowed:
+            raise SceneFileError(f"{prefix}.{k}" if prefix else k,
+                                 f"unknown key; allowed here: {', '.join(sorted(allowed))}")
+
+
+def _wrap(err: ValueError, default: str, names: dict) -> SceneFileError:
+    """Map a library ValueError to the key whose name its message mentions."""
+    msg = str(err)
+    for pattern, key in names.items():
+        if re.search(pattern, msg):
+            return SceneFileError(key, msg)
+    return SceneFileError(default, msg)
+
+
+# ----------------------------------------------------------------------------- loading
+def read(path) -> dict:
+    """Parse a TOML file; syntax errors become ``SceneFileError("file", ...)``."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise SceneFileError("file", f"no such scene file: {path}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneFileError("file", f"{path} is not valid TOML: {e}") from None
+
+
+def load(path, max_edge: float | None = None, refine_edge: float | None = None) -> SceneSpec:
+    """Load and fully validate a scene file (see the module docstring for the schema).
+
+    Args:
+        path: the TOML file.
+        max_edge: optional override of ``object.max_edge`` (built-in shapes only); a
+            refined zone near the grip keeps its radius and edge length (at most max_edge).
+        refine_edge: optional override of ``object.refine_edge``.
+    Raises:
+        SceneFileError: with the offending key.
+    """
+    data = read(path)
+    return from_dict(data, base=os.path.dirname(os.path.abspath(path)), path=str(path), max_edge=max_edge,
+                     refine_edge=refine_edge)
+
+
+def load_text(text: str, base: str = ".", max_edge: float | None = None,
+              refine_edge: float | None = None) -> SceneSpec:
+    """Like :func:`load` from a TOML string; ``mesh_file`` paths are relative to ``base``."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneFileError("file", f"not valid TOML: {e}") from None
+    return from_dict(data, base=base, path="<string>", max_edge=max_edge, refine_edge=refine_edge)
+
+
+def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float | None = None,
+              refine_edge: float | None = None) -> SceneSpec:
+    """Build a :class:`SceneSpec` from parsed TOML data."""
+    from .material import Material
+    from .scene import Fingers, Scene, Settings
+
+    _unknown("", data, set(TABLES) | set(TOP_KEYS))
+    for t in REQUIRED_TABLES:
+        if t not in data:
+            raise SceneFileError(t, f"missing table [{t}]")
+    for t in TABLES:
+        if t in data:
+            _table(t, data[t])
+    title = data.get("title", os.path.splitext(os.path.basename(path))[0])
+    if not isinstance(title, str):
+        raise SceneFileError("title", f"expected a string, got {_describe(title)}")
+    is_band = isinstance(data["object"], dict) and "band" in data["object"]
+    for t, keys in TABLES.items():
+        if keys is None or t not in data:
+            continue
+        _unknown(t, data[t], set(keys))
+        for k, required in keys.items():
+            if is_band and t == "material" and k in ("nu", "thickness"):
+                continue                      # a band has no nu; its height may come from [object]
+            if required and k not in data[t]:
+                raise SceneFileError(f"{t}.{k}", "missing (required)")
+    if ("depth" in data["squeeze"]) == ("relative_depth" in data["squeeze"]):
+        raise SceneFileError("squeeze.depth", "give exactly one of squeeze.depth [m] or squeeze.relative_depth")
+
+    # accuracy (first: it holds the precision)
+    acc = data.get("accuracy", {})
+    precision = _choice("accuracy.precision", acc.get("precision", "float64"), PRECISIONS)
+    settings = {}
+    for k in ("step", "event_tol", "newton_tol", "gap_tol"):
+        if k in acc:
+            settings[k] = _number(f"accuracy.{k}", acc[k], positive=True)
+    for k in ("capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
+        if k in acc:
+            settings[k] = _number(f"accuracy.{k}", acc[k], integer=True)
+    if settings.get("capacity", 2) < 2:
+        raise SceneFileError("accuracy.capacity", "expected at least 2 (one contact per finger)")
+
+    # material
+    mat_t = data["material"]
+    E = _number("material.E", mat_t["E"])
+    nu = _number("material.nu", mat_t.get("nu", 0.3))         # a band ignores nu
+    band_height = None
+    if is_band:
+        obj_t = data["object"]
+        band_height = _number("object.height", obj_t["height"], positive=True) if "height" in obj_t else None
+        if "thickness" in mat_t:
+            th = _number("material.thickness", mat_t["thickness"])
+            if band_height is not None and not math.isclose(th, band_height, rel_tol=1e-9):
+                raise SceneFileError("material.thickness", f"{th} m differs from object.height = {band_height} m; "
+                                     "for a band both are its height out of the plane (give one of them)")
+            band_height = th if band_height is None else band_height
+        band_height = 5e-3 if band_height is None else band_height
+        th = band_height
+    else:
+        th = _number("material.thickness", mat_t["thickness"])
+    try:
+        material = Material(E=E, nu=nu, thickness=th)
+    except ValueError as e:
+        raise _wrap(e, "material", {r"Material\.E\b": "material.E", r"Material\.nu\b": "material.nu",
+                                    r"Material\.thickness\b": "material.thickness"}) from None
+
+    # fingers
+    fin = data["fingers"]
+    radius = _number("fingers.radius", fin["radius"], positive=True)
+    rotation = None
+    if "rotation" in fin:
+        rot = fin["rotation"]
+        if not (isinstance(rot, list) and len(rot) == 2 and all(isinstance(r, list) and r for r in rot)
+                and len(rot[0]) == len(rot[1])):
+            raise SceneFileError("fingers.rotation", "expected two equally long, non-empty lists of "
+                                 "polynomial coefficients [[...], [...]] (one per finger, highest power first)")
+        rotation = np.array([[_number(f"fingers.rotation[{i}]", c) for c in r] for i, r in enumerate(rot)])
+    try:
+        fingers = Fingers(radius=radius, rotation=rotation)
+    except ValueError as e:
+        raise _wrap(e, "fingers", {"radius": "fingers.radius", "rotation": "fingers.rotation"}) from None
+
+    # grip (points are needed for refinement)
+    grip_t = data["grip"]
+    if ("nodes" in grip_t) == ("points" in grip_t):
+        raise SceneFileError("grip", "give exactly one of grip.nodes = [i, j] or grip.points = [[x1, y1], [x2, y2]]")
+    grip_points = _points("grip.points", grip_t["points"], count=2) if "points" in grip_t else None
+    grip_nodes = None
+    if "nodes" in grip_t:
+        g = grip_t["nodes"]
+        if not (isinstance(g, list) and len(g) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in g)):
+            raise SceneFileError("grip.nodes", f"expected two integer mesh node indices [i, j], got {_describe(g)}")
+        grip_nodes = g
+
+    if is_band:
+        mesh = _band(data["object"], band_height, (max_edge, refine_edge))
+    else:
+        mesh = _object(data["object"], base, grip_points, (max_edge, refine_edge))
+
+    # grip → nodes
+    from .scene import nearest_boundary_node
+    if grip_points is not None:
+        grip = tuple(nearest_boundary_node(mesh, p) for p in grip_points)
+        if grip[0] == grip[1]:
+            raise SceneFileError("grip.points", f"both points are nearest to the same boundary node {grip[0]}")
+        gkey = "grip.points"
+    else:
+        bad = [v for v in grip_nodes if not 0 <= v < mesh.n]
+        if bad:
+            raise SceneFileError("grip.nodes", f"node(s) {bad} do not exist: the mesh has nodes 0..{mesh.n - 1}")
+        grip, gkey = tuple(grip_nodes), "grip.nodes"
+
+    # squeeze
+    sq = data["squeeze"]
+    if "relative_depth" in sq:
+        rho = _number("squeeze.relative_depth", sq["relative_depth"], positive=True)
+        if rho >= 1:
+            raise SceneFileError("squeeze.relative_depth", f"expected a fraction 0 < rho < 1 of the grip distance, got {rho}")
+        dkey, depth = "squeeze.relative_depth", rho * _grip_distance(mesh, grip)
+    else:
+        dkey, depth = "squeeze.depth", _number("squeeze.depth", sq["depth"])
+    friction = _number("squeeze.friction", sq.get("friction", 0.5))
+    fmodel = _choice("squeeze.friction_model", sq.get("friction_model", "coulomb"), ("coulomb", "frictionless", "stick"))
+    contact = _choice("squeeze.contact", sq.get("contact", "point" if is_band else "segment"), ("segment", "point"))
+    method = _choice("squeeze.method", sq.get("method", "sparse"), METHODS)
+    try:
+        scene = Scene(mesh=mesh, material=material, fingers=fingers, grip=grip, friction=friction, depth=depth,
+                      friction_model=fmodel, contact=contact, method=method, settings=Settings(**settings))
+    except ValueError as e:
+        m = re.search(r"Settings\.(\w+)", str(e))
+        if m:
+            raise SceneFileError(f"accuracy.{m.group(1)}", str(e)) from None
+        raise _wrap(e, "squeeze", {r"^friction=": "squeeze.friction", r"^depth=": dkey,
+                                   r"^friction_model=": "squeeze.friction_model",
+                                   r"^contact=": "squeeze.contact", r"^grip": gkey}) from None
+    _check_cones(scene, gkey)
+    if depth >= _grip_distance(mesh, grip):
+        raise SceneFileError(dkey, f"depth {depth} m is not smaller than the distance between the grip "
+                             f"nodes ({_grip_distance(mesh, grip):.6g} m)")
+    return SceneSpec(scene=scene, precision=precision, title=title, path=str(path), data=data)
+
+
+def _grip_distance(mesh, grip) -> float:
+    P = np.asarray(mesh.points)
+    return float(np.linalg.norm(P[grip[0]] - P[grip[1]]))
+
+
+def _check_cones(scene, key):
+    """The segment between the grip nodes must lie in both friction cones (numpy twin of
+    ``grasp.check_grip``, so no JAX array is created while loading)."""
+    mesh = scene.mesh
+    pos = {int(v): k for k, v in enumerate(np.asarray(mesh.boundary))}
+    i, j = (int(v) for v in scene.grip)
+    P, N = np.asarray(mesh.points), np.asarray(mesh.normals)
+    seg = P[j] - P[i]
+    seg = seg / np.linalg.norm(seg)
+    ang = np.degrees(np.arccos(np.clip([-N[pos[i]] @ seg, N[pos[j]] @ seg], -1, 1)))
+    half = np.degrees(np.arctan(float(scene.friction))) if scene.friction_model == "coulomb" else 0.0
+    if np.any(ang > half + np.degrees(CONE_SLACK)):
+        raise SceneFileError(key, (
+            f"grip nodes ({i}, {j}): the segment between them makes {ang[0]:.3g}° and {ang[1]:.3g}° with the "
+            f"inward normals, but the friction cones only allow {half:.3g}° (squeeze.friction = "
+            f"{float(scene.friction):.3g}, friction_model = {scene.friction_model!r}); choose more nearly "
+            "opposite grip points or more friction"))
+
+
+def _band(obj, height, overrides=(None, None)):
+    """A :class:`~jaxsqueeze.band.Band` from an ``[object]`` table with ``band = ...``."""
+    from . import curves
+    from .band import Band
+
+    _unknown("object", obj, set(BAND_KEYS))
+    for k, required in BAND_KEYS.items():
+        if required and k not in obj:
+            raise SceneFileError(f"object.{k}", "missing (required for a band)")
+    for opt, v in zip(("--max-edge", "--refine-edge"), overrides):
+        if v is not None:
+            raise SceneFileError(opt, "this scene is a band (object.band); mesh sizes apply to built-in "
+                                 "shapes only (a band's resolution is object.nodes)")
+    kind = _choice("object.band", obj["band"], BANDS)
+    size = _number("object.size", obj["size"], positive=True)
+    m = _number("object.nodes", obj["nodes"], integer=True)
+    if m < 8:
+        raise SceneFileError("object.nodes", f"a band needs at least 8 nodes, got {m}")
+    width = _number("object.width", obj["width"], positive=True) if "width" in obj else 0.5e-3
+    try:
+        curve = {"heart": lambda: curves.heart(size), "leaf": lambda: curves.leaf(size, size / 2, size / 40),
+                 "circle": lambda: curves.circle(size / 2)}[kind]()
+        return Band.from_function(curve, m, width=width, height=height)
+    except ValueError as e:
+        raise _wrap(e, "object", {r"width": "object.width", r"height": "object.height",
+                                  r"size|radius|length": "object.size", r"nodes|\bm\b": "object.nodes"}) from None
+
+
+def _object(obj, base, grip_points, overrides=(None, None)):
+    from . import shapes
+    from .mesh import read_mesh
+
+    obj = _table("object", obj)
+    has_shape, has_file = "shape" in obj, "mesh_file" in obj
+    if has_shape == has_file:
+        raise SceneFileError("object", "give exactly one of object.shape (a built-in shape), object.mesh_file "
+                             "or object.band")
+    if has_file:
+        _unknown("object", obj, {"mesh_file"})
+        for opt, v in zip(("--max-edge", "--refine-edge"), overrides):
+            if v is not None:
+                raise SceneFileError(opt, "this scene reads its mesh from object.mesh_file; mesh sizes "
+                                     "apply to built-in shapes only")
+        f = obj["mesh_file"]
+        if not isinstance(f, str):
+            raise SceneFileError("object.mesh_file", f"expected a file name, got {_describe(f)}")
+        path = f if os.path.isabs(f) else os.path.join(base, f)
+        if not os.path.isfile(path):
+            raise SceneFileError("object.mesh_file", f"no such file: {path}")
+        try:
+            return read_mesh(path)
+        except ValueError as e:
+            raise SceneFileError("object.mesh_file", str(e)) from None
+        except Exception as e:  # meshio's own read errors (unknown format, corrupt file)
+            raise SceneFileError("object.mesh_file", f"cannot read {path}: {type(e).__name__}: {e}") from None
+
+    shape = _choice("object.shape", obj["shape"], tuple(SHAPES))
+    req, opt = SHAPES[shape], SHAPE_OPTIONAL[shape]
+    _unknown("object", obj, {"shape", *req, *opt, *MESH_KEYS})
+    for k in (*req, "max_edge"):
+        if k not in obj:
+            raise SceneFileError(f"object.{k}", f"missing (required for shape = {shape!r})")
+    kw: dict = {}
+    file_max_edge = _number("object.max_edge", obj["max_edge"], positive=True)
+    kw["max_edge"] = file_max_edge
+    for k in ("refine_edge", "refine_radius"):
+        if k in obj:
+            kw[k] = _number(f"object.{k}", obj[k], positive=(k == "refine_edge"))
+    refined = bool(kw.keys() & {"refine_edge", "refine_radius"})
+    if refined and grip_points is None:
+        raise SceneFileError("object.refine_edge" if "refine_edge" in kw else "object.refine_radius",
+                             "refinement near the grip needs grip.points (node indices exist only after meshing)")
+    max_edge_override, refine_override = overrides
+    if max_edge_override is not None:
+        # coarser or finer away from the fingers; the refined zone keeps its size
+        kw["max_edge"] = float(max_edge_override)
+        if refined:
+            kw.setdefault("refine_radius", 2 * file_max_edge)
+            kw["refine_edge"] = min(kw.get("refine_edge", file_max_edge / 4), kw["max_edge"])
+    if refine_override is not None:
+        if not refined:
+            raise SceneFileError("--refine-edge", "this scene has no refinement near the grip (object.refine_edge)")
+        kw["refine_edge"] = min(float(refine_override), kw["max_edge"])
+    if refined:
+        kw["refine_near"] = grip_points
+    args = []
+    if shape == "polygon":
+        args.append(_points("object.vertices", obj["vertices"], min_count=3))
+        if "holes" in obj:
+            h = obj["holes"]
+            if not isinstance(h, list):
+                raise SceneFileError("object.holes", f"expected a list of point lists, got {_describe(h)}")
+            kw["holes"] = [_points(f"object.holes[{i}]", v, min_count=3) for i, v in enumerate(h)]
+    else:
+        args = [_number(f"object.{k}", obj[k], positive=True) for k in req]
+        if "center" in obj:
+            kw["center"] = _points("object.center", [obj["center"]], count=1)[0]
+    names = {r"refine_edge": "object.refine_edge", r"refine_radius": "object.refine_radius",
+             r"refine_near": "grip.points", r"max_edge": "object.max_edge", r"center": "object.center",
+             r"^hole|holes|hole \d": "object.holes", r"outline|vertices|polygon": "object.vertices"}
+    names.update({rf"\b{k}\b": f"object.{k}" for k in req})
+    try:
+        return getattr(shapes, shape)(*args, **kw)
+    except ValueError as e:
+        raise _wrap(e, "object", names) from None

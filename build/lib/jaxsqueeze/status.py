@@ -1,0 +1,38 @@
+"""Outcome codes carried as values in jitted results (DESIGN 2.4)."""
+from __future__ import annotations
+
+import enum
+
+
+class Status(enum.IntEnum):
+    """Status of a squeeze. Stored as an int32 in results so ``vmap`` keeps working."""
+
+    SUCCESS = 0          #: target depth reached
+    SLIP_FAILURE = 1     #: every contact on one finger slides, or a finger lost all contact
+    MAX_STEPS = 2        #: step bound reached before the target depth
+    NEWTON_FAILURE = 3   #: slip-angle Newton solve did not converge
+    OVERFLOW = 4         #: more contact nodes than slots (raise ``capacity``)
+    NONFINITE = 5        #: a NaN or inf appeared in the state
+    EVENT_OVERFLOW = 6   #: the event log is full (raise ``max_events``)
+    INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone
+    STALLED = 8          #: a contact event undid itself at one depth (no consistent contact set)
+
+    @property
+    def advice(self) -> str:
+        return _ADVICE[self]
+
+
+_ADVICE = {
+    Status.SUCCESS: "The squeeze reached the target depth.",
+    Status.SLIP_FAILURE: "The grasp failed: all contacts on one finger slide. Try more friction or another grip.",
+    Status.MAX_STEPS: "Step bound reached. Raise Settings.max_steps or the step size.",
+    Status.NEWTON_FAILURE: "Slip-angle Newton did not converge. Lower Settings.step or raise Settings.newton_iters.",
+    Status.OVERFLOW: "More contact nodes than slots. Raise Settings.capacity.",
+    Status.NONFINITE: "A non-finite value appeared. Check the scene's scale and material values.",
+    Status.EVENT_OVERFLOW: "The event log is full. Raise Settings.max_events.",
+    Status.STALLED: ("A node touched a fingertip, but as a contact it would pull: no consistent contact set "
+                     "exists at this depth on this mesh (typical of frictionless squeezes with a soft neutral "
+                     "mode, or of a coarse corner). Refine the mesh near the contact or use Coulomb friction."),
+    Status.INFEASIBLE_GRIP: ("The segment between the two grip nodes leaves a friction cone, so the squeeze "
+                             "cannot start (Section I-A). Pick nodes more nearly opposite or raise the friction."),
+}

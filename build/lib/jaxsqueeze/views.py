@@ -1,0 +1,347 @@
+"""Turn a :class:`~jaxsqueeze.grasp.SqueezeResult` into the paper's views (Section V-B).
+
+Pure numpy: every function takes a result (and sometimes the mesh or the compliance
+operator) and returns plain arrays, lists and dicts. Nothing here runs JAX code, so the
+views work on results loaded back from disk as well.
+
+Conventions
+-----------
+* Rows index the recorded states of ``res`` (initial touch, every step, every event);
+  ``row=-1`` is the final state. Boundary position ``k`` is mesh node ``res.nodes[k]``.
+* Fingers are numbered 0/1 in arguments (as in the result) and 1/2 in tables and JSON
+  (as in the paper).
+* Polar angles θ are those of the result: the angle of a contact node about its fingertip
+  centre, in the fingertip frame [rad] (for rotating fingertips add ``res.alpha``).
+* The *relative depth* is d / D0 with D0 the distance between the two grip nodes before the
+  squeeze (the paper's "relative squeeze depth", Figs. 5 and 6).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .engine import FREE, SLIP_NEG, SLIP_POS, STICK  # noqa: E402,F401  (one definition of the modes)
+MODE_NAMES = {FREE: "free", STICK: "stick", SLIP_POS: "slip+", SLIP_NEG: "slip-"}
+EVENT_LETTERS = "ABCD"
+EVENT_MEANING = {"A": "new contact", "B": "contact break", "C": "stick to slip", "D": "slip to stick"}
+
+
+def _row(res, row: int) -> int:
+    k = len(np.asarray(res.depth))
+    r = int(row)
+    if not -k <= r < k:
+        raise IndexError(f"row {row} out of range: the result has {k} recorded rows")
+    return r % k
+
+
+def _unit(a):
+    return np.stack([np.cos(a), np.sin(a)], axis=-1)
+
+
+def grip_positions(res) -> np.ndarray:
+    """(2, 2) positions of the two grip nodes before the squeeze [m] (centroid frame).
+
+    Recovered from the first recorded row: each initial contact lies on its fingertip circle.
+    """
+    modes, finger = np.asarray(res.modes[0]), np.asarray(res.finger[0])
+    theta, C = np.asarray(res.theta[0], float), np.asarray(res.centres[0], float)
+    alpha = np.asarray(res.alpha[0], float)
+    r = float(res.radius)
+    out = np.full((2, 2), np.nan)
+    for f in (0, 1):
+        k = np.flatnonzero((modes > FREE) & (finger == f))
+        if k.size:
+            out[f] = C[f] + r * _unit(theta[k[0]] + alpha[f])
+    return out
+
+
+def grip_distance(res) -> float:
+    """D0: distance between the two grip nodes before the squeeze [m]."""
+    p = grip_positions(res)
+    return float(np.linalg.norm(p[1] - p[0]))
+
+
+def relative_depth(res) -> np.ndarray:
+    """(k,) recorded depths divided by the initial grip distance D0."""
+    return np.asarray(res.depth, float) / grip_distance(res)
+
+
+# ----------------------------------------------------------------------------- contact regions
+def _runs(mask: np.ndarray, loops) -> list[np.ndarray]:
+    """Contiguous runs of True positions along cyclic boundary loops (lists of positions)."""
+    out, start = [], 0
+    for n in loops:
+        idx = np.arange(start, start + n)
+        m = mask[idx]
+        start += n
+        if not m.any():
+            continue
+        if m.all():
+            out.append(idx)
+            continue
+        # rotate so the loop starts at a False entry: runs then never wrap
+        first_false = int(np.flatnonzero(~m)[0])
+        rot = np.roll(idx, -first_false)
+        mr = mask[rot]
+        edges = np.diff(np.concatenate([[0], mr.astype(int), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            out.append(rot[a:b])
+    return out
+
+
+def contact_regions(res, row: int = -1, loops=None) -> list[list[dict]]:
+    """Contact regions on each finger at one recorded row (Fig. 4).
+
+    Args:
+        res: a squeeze result.
+        row: recorded row (default: the final state).
+        loops: lengths of the boundary loops (``mesh.loops``); default: one closed loop.
+    Returns:
+        ``[regions of finger 1, regions of finger 2]``; each region is a dict for one
+        contiguous run of contact nodes along the boundary, in boundary order, with keys
+        ``positions`` (boundary positions), ``nodes`` (mesh node ids), ``modes`` (names:
+        "stick", "slip+", "slip-"), ``theta`` (polar angles [rad]), ``theta_range``
+        ((min, max) [rad]), ``arc_length`` (r·(max − min) [m]), ``n_stick``, ``n_slip``.
+    """
+    r = _row(res, row)
+    modes, finger = np.asarray(res.modes[r]), np.asarray(res.finger[r])
+    theta = np.asarray(res.theta[r], float)
+    nodes = np.asarray(res.nodes)
+    radius = float(res.radius)
+    loops = (len(modes),) if loops is None else tuple(int(v) for v in loops)
+    out = []
+    for f in (0, 1):
+        regions = []
+        for run in _runs((modes > FREE) & (finger == f), loops):
+            th = np.unwrap(theta[run])
+            md = modes[run]
+            regions.append(dict(
+                positions=[int(k) for k in run], nodes=[int(v) for v in nodes[run]],
+                modes=[MODE_NAMES[int(v)] for v in md], theta=[float(v) for v in th],
+                theta_range=(float(th.min()), float(th.max())),
+                arc_length=float(radius * (th.max() - th.min())),
+                n_stick=int(np.sum(md == STICK)), n_slip=int(np.sum(md >= SLIP_POS))))
+        out.append(regions)
+    return out
+
+
+# ----------------------------------------------------------------------------- force profile
+class ForceProfile(NamedTuple):
+    """Contact forces of one finger at one row, ordered along the fingertip (Fig. 5).
+
+    s: (c,) arc length on the fingertip, s = r (θ − θ_mid) with θ_mid the middle of the
+        finger's contact extent [m]; theta: (c,) polar angles [rad]; density: (c,) force
+        magnitude per unit contact length [N/m]; angle: (c,) polar angle of the force
+        direction in the world frame [rad]; force: (c, 2) [N]; nodes: (c,) mesh node ids;
+        modes: (c,) 1 stick, 2/3 slip; depth: the row's depth [m]; relative_depth: d / D0.
+    """
+
+    s: np.ndarray
+    theta: np.ndarray
+    density: np.ndarray
+    angle: np.ndarray
+    force: np.ndarray
+    nodes: np.ndarray
+    modes: np.ndarray
+    depth: float
+    relative_depth: float
+
+
+def force_profile(res, row: int = -1, finger: int = 0, mesh=None) -> ForceProfile:
+    """Force density and direction along one finger's contact at one row (Fig. 5).
+
+    Each nodal force is divided by its tributary contact length: half the distance to each
+    boundary neighbour, measured along the fingertip arc (r Δθ) when that neighbour is in
+    contact with the same finger. Toward a free neighbour (the end of a contact run) the
+    contact pressure falls to zero somewhere on the boundary edge between them; the half
+    length of that edge is used, measured in the deformed state (this needs ``mesh``;
+    without it the half arc gap on the other side is mirrored, and an isolated contact
+    node gets a NaN density).
+    """
+    r = _row(res, row)
+    if finger not in (0, 1):
+        raise ValueError(f"finger must be 0 (finger 1) or 1 (finger 2); got {finger!r}")
+    modes, fg = np.asarray(res.modes[r]), np.asarray(res.finger[r])
+    theta = np.asarray(res.theta[r], float)
+    F = np.asarray(res.forces[r], float)
+    radius = float(res.radius)
+    m = len(modes)
+    on = (modes > FREE) & (fg == finger)
+    loops = (m,) if mesh is None else tuple(mesh.loops)
+    pos_all, ds_all = [], []
+    if mesh is not None:
+        x = np.asarray(mesh.points, float)[np.asarray(mesh.boundary)] + np.asarray(res.boundary_displacement[r], float)
+    for run in _runs(on, loops):
+        th = np.unwrap(theta[run])
+        gaps = radius * np.abs(np.diff(th))                 # arc gaps inside the run
+        left, right = np.full(len(run), np.nan), np.full(len(run), np.nan)
+        left[1:], right[:-1] = gaps / 2, gaps / 2
+        # ends of the run: half the deformed boundary edge to the free neighbour
+        start = 0
+        for n in loops:
+            if start <= run[0] < start + n:
+                break
+            start += n
+        prev_ = start + (run[0] - start - 1) % n
+        next_ = start + (run[-1] - start + 1) % n
+        if mesh is not None:
+            left[0] = np.linalg.norm(x[run[0]] - x[prev_]) / 2
+            right[-1] = np.linalg.norm(x[run[-1]] - x[next_]) / 2
+        else:
+            if len(run) > 1:
+                left[0], right[-1] = right[0], left[-1]
+        trib = left + right
+        pos_all.append(run)
+        ds_all.append(trib)
+    if not pos_all:
+        e = np.zeros(0)
+        return ForceProfile(e, e, e, e, np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, int),
+                            float(res.depth[r]), float(relative_depth(res)[r]))
+    pos = np.concatenate(pos_all)
+    trib = np.concatenate(ds_all)
+    th = theta[pos]
+    th = th[0] + (np.unwrap(th - th[0]))
+    order = np.argsort(th)
+    pos, trib, th = pos[order], trib[order], th[order]
+    mid = 0.5 * (th.min() + th.max())
+    f = F[pos]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dens = np.linalg.norm(f, axis=1) / trib
+    return ForceProfile(s=radius * (th - mid), theta=th, density=dens,
+                        angle=np.arctan2(f[:, 1], f[:, 0]), force=f,
+                        nodes=np.asarray(res.nodes)[pos], modes=modes[pos],
+                        depth=float(res.depth[r]), relative_depth=float(relative_depth(res)[r]))
+
+
+def spline(x, y, num: int = 100):
+    """Cubic-spline interpolation of nodal values for plotting, as in the paper.
+
+    Returns (xs, ys) with ``num`` points over [x.min(), x.max()]; falls back to the input
+    when there are fewer than 3 points (no spline through 1 or 2 nodes) or NaNs.
+    """
+    from scipy.interpolate import CubicSpline
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if len(x) < 3 or np.any(np.diff(x) <= 0):
+        return x, y
+    xs = np.linspace(x[0], x[-1], num)
+    return xs, CubicSpline(x, y)(xs)
+
+
+# ----------------------------------------------------------------------------- sliding profile
+class SlidingProfile(NamedTuple):
+    """Polar angles of one finger's contact nodes at every recorded row (Fig. 6).
+
+    depth: (k,) [m]; relative_depth: (k,); nodes: (c,) mesh ids of every boundary node that
+    touches this finger at some row; theta: (k, c) polar angle [rad], NaN while the node is
+    not on this finger; modes: (k, c) 0 free, 1 stick, 2/3 slip.
+    """
+
+    depth: np.ndarray
+    relative_depth: np.ndarray
+    nodes: np.ndarray
+    theta: np.ndarray
+    modes: np.ndarray
+
+
+def sliding_profile(res, finger: int = 0) -> SlidingProfile:
+    """Polar angle of every contact node of ``finger`` (0 or 1) against depth (Fig. 6)."""
+    if finger not in (0, 1):
+        raise ValueError(f"finger must be 0 (finger 1) or 1 (finger 2); got {finger!r}")
+    modes, fg = np.asarray(res.modes), np.asarray(res.finger)
+    theta = np.asarray(res.theta, float)
+    on = (modes > FREE) & (fg == finger)
+    cols = np.flatnonzero(on.any(axis=0))
+    th = np.where(on[:, cols], theta[:, cols], np.nan)
+    # keep angles continuous across the ±π cut: shift each column toward the first angle
+    if cols.size:
+        ref = np.nanmedian(th)
+        th = ref + (th - ref + np.pi) % (2 * np.pi) - np.pi
+    return SlidingProfile(np.asarray(res.depth, float), relative_depth(res), np.asarray(res.nodes)[cols],
+                          th, np.where(on[:, cols], modes[:, cols], FREE))
+
+
+# ----------------------------------------------------------------------------- tables
+def event_table(res) -> list[dict]:
+    """Events in order: dicts with depth [m], relative_depth, node (mesh id), kind ('A'..'D'),
+    meaning, finger (1 or 2)."""
+    D0 = grip_distance(res)
+    out = []
+    for d, n, k, f in zip(*(np.asarray(a) for a in res.events)):
+        letter = EVENT_LETTERS[int(k)]
+        out.append(dict(depth=float(d), relative_depth=float(d) / D0, node=int(n), kind=letter,
+                        meaning=EVENT_MEANING[letter], finger=int(f) + 1))
+    return out
+
+
+def row_displacement(res, op, row: int = -1) -> np.ndarray:
+    """(n, 2) displacement of every node at a recorded row [m], centroid frame.
+
+    The result stores the full field only at the final depth; every other row is rebuilt
+    exactly (DESIGN 2.1: the state at a row is the linear-elastic response to that row's
+    contact forces) from the recorded boundary forces and displacements: the compliance
+    part from the operator's field map, the rigid part fitted to the recorded boundary
+    displacements. ``op`` is ``scene.operator()``; it must carry a field map.
+    """
+    from .operator import rigid_modes
+
+    if op.field is None:
+        raise ValueError("the compliance operator has no field map; cannot rebuild the full field")
+    r = _row(res, row)
+    L, Fs = float(op.length), float(op.force_scale)
+    f_hat = np.asarray(res.forces[r], float).reshape(-1) / Fs
+    u = np.asarray(op.field.solve(f_hat), float).reshape(-1, 2) * L
+    nodes = np.asarray(op.nodes)
+    resid = (np.asarray(res.boundary_displacement[r], float) - u[nodes]).reshape(-1) / L
+    N_b = np.asarray(rigid_modes(np.asarray(op.points, float)))
+    g, *_ = np.linalg.lstsq(N_b, resid, rcond=None)
+    N_all = np.asarray(rigid_modes(op.field.points))
+    return u + (N_all @ g).reshape(-1, 2) * L
+
+
+def summary(res, scene=None, timings: dict | None = None) -> dict:
+    """Everything a report needs, as JSON-ready Python types.
+
+    Keys: status, advice, final_depth [m], target_depth [m] (with a scene), grip_distance [m],
+    relative_depth, rows, n_events, events (see :func:`event_table`), event_sequence (letters),
+    total_force [N] per finger at the final depth ({"finger1": [fx, fy], "finger2": ...}),
+    contact_regions per finger at the final depth (see :func:`contact_regions`; per finger also
+    n_stick, n_slip), grip nodes, scene parameters, and ``timings`` [s] if given.
+    """
+    from .status import Status
+
+    st = Status(int(res.status))
+    loops = None
+    if scene is not None and hasattr(scene.mesh, "loops"):
+        loops = scene.mesh.loops
+    regions = contact_regions(res, -1, loops=loops)
+    tf = np.asarray(res.total_force)[-1]
+    events = event_table(res)
+    D0 = grip_distance(res)
+    out = dict(
+        status=st.name, success=bool(st == Status.SUCCESS), advice=st.advice,
+        final_depth=float(res.final_depth), grip_distance=D0,
+        relative_depth=float(res.final_depth) / D0, rows=int(len(np.asarray(res.depth))),
+        n_events=len(events), event_sequence="".join(e["kind"] for e in events), events=events,
+        total_force={f"finger{f + 1}": [float(v) for v in tf[f]] for f in (0, 1)},
+        total_force_magnitude={f"finger{f + 1}": float(np.linalg.norm(tf[f])) for f in (0, 1)},
+        contact_regions={f"finger{f + 1}": dict(
+            regions=regions[f], n_stick=sum(g["n_stick"] for g in regions[f]),
+            n_slip=sum(g["n_slip"] for g in regions[f])) for f in (0, 1)},
+    )
+    if scene is not None:
+        out["target_depth"] = float(scene.depth)
+        out["grip_nodes"] = [int(v) for v in np.asarray(scene.grip)]
+        out["scene"] = dict(
+            nodes=int(scene.mesh.n) if hasattr(scene.mesh, "n") else None,
+            boundary_nodes=int(len(scene.boundary_nodes())),
+            E=float(scene.material.E), nu=float(scene.material.nu),
+            thickness=float(scene.material.thickness), radius=float(scene.fingers.radius),
+            friction=float(scene.friction), friction_model=scene.friction_model, contact=scene.contact,
+            method=scene.method)
+    if timings is not None:
+        out["timings"] = {k: float(v) for k, v in timings.items()}
+    return out
