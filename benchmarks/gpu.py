@@ -76,12 +76,12 @@ def main(argv=None):
             for B in a.batches:
                 if B == 1:
                     def fn(o, g0, grips):
-                        st = G._run(o, dataclasses.replace(g0, grip=grips[0]), cfg)
-                        return st.status, st.count, st.F
+                        res, F, _ = G._run(o, dataclasses.replace(g0, grip=grips[0]), cfg)
+                        return res.status, res.count, F
                 else:
                     def fn(o, g0, grips):
-                        st = jax.vmap(lambda q: G._run(o, dataclasses.replace(g0, grip=q), cfg))(grips)
-                        return st.status, st.count, st.F
+                        res, F, _ = jax.vmap(lambda q: G._run(o, dataclasses.replace(g0, grip=q), cfg))(grips)
+                        return res.status, res.count, F
                 grips = pos[candidates(sc.mesh, max(B, 4))[:B]]
                 grips = jax.device_put(jnp.asarray(grips), dev)
                 t = time.perf_counter()

@@ -18,11 +18,15 @@ from jax.custom_batching import custom_vmap
 NEUTRAL_RTOL = 1e-3   # truncation of lstsq: singular values below this fraction count as zero
 
 
-def _one_at_a_time(fn):
+def _one_at_a_time(fn, batched):
+    """Batch rule: one system at a time on the CPU, the batched kernel elsewhere (GPU solvers
+    have no such deadlock)."""
     def rule(axis_size, in_batched, A, B):
         A = A if in_batched[0] else jnp.broadcast_to(A, (axis_size,) + A.shape)
         B = B if in_batched[1] else jnp.broadcast_to(B, (axis_size,) + B.shape)
-        return lax.map(lambda ab: fn(*ab), (A, B)), True
+        if jax.default_backend() == "cpu":
+            return lax.map(lambda ab: fn(*ab), (A, B)), True
+        return jax.vmap(batched)(A, B), True
     return rule
 
 
@@ -41,8 +45,8 @@ def lstsq(A: jax.Array, B: jax.Array) -> jax.Array:
     return jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B
 
 
-solve.def_vmap(_one_at_a_time(solve))
-lstsq.def_vmap(_one_at_a_time(lstsq))
+solve.def_vmap(_one_at_a_time(solve, jnp.linalg.solve))
+lstsq.def_vmap(_one_at_a_time(lstsq, lambda A, B: jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B))
 
 
 def inv(A: jax.Array) -> jax.Array:
