@@ -1,7 +1,0 @@
-"""``python -m jaxsqueeze``: the same as the ``jaxsqueeze`` command."""
-import sys
-
-from .cli import main
-
-if __name__ == "__main__":
-    sys.exit(main())
