@@ -21,6 +21,8 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/precompute.py
 	$(BIN)/python benchmarks/squeeze.py
+	$(BIN)/python benchmarks/effects.py
+	$(BIN)/python benchmarks/accuracy.py
 
 clean:
 	rm -rf $(VENV) demo_out
