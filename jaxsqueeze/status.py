@@ -17,6 +17,9 @@ class Status(enum.IntEnum):
     INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone
     STALLED = 8          #: a contact event undid itself at one depth (no consistent contact set)
 
+    def __str__(self) -> str:
+        return self.name
+
     @property
     def advice(self) -> str:
         return _ADVICE[self]
