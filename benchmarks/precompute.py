@@ -106,7 +106,6 @@ def _sparse_breakdown(mesh, nu, chunk=128):
 
     t0 = time.perf_counter()
     K = fem._scipy_stiffness(mesh, float(nu))
-    t1 = time.perf_counter()
     b = np.asarray(mesh.boundary)
     bdofs = np.stack([2 * b, 2 * b + 1], axis=1).reshape(-1)
     pts = mesh.points / fem.object_length(mesh)

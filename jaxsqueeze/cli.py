@@ -181,8 +181,10 @@ def _report(s, res, out, np) -> str:
              f"  final depth  {s['final_depth'] * mm:.3f} mm of {s.get('target_depth', np.nan) * mm:.3f} mm "
              f"({100 * s['relative_depth']:.1f} % of the grip distance {s['grip_distance'] * mm:.1f} mm), "
              f"{s['rows']} recorded states"]
+    from .views import EVENT_LETTERS
+
     seq = s["event_sequence"]
-    counts = ", ".join(f"{k} {seq.count(k)}" for k in "ABCD")
+    counts = ", ".join(f"{k} {seq.count(k)}" for k in EVENT_LETTERS)
     shown = seq if len(seq) <= 60 else seq[:57] + "..."
     lines.append(f"  events       {s['n_events']} ({counts}): {shown or '-'}")
     for f in (1, 2):

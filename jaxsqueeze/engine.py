@@ -499,9 +499,9 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
 
     def _event(st, c, s1, d0, d1):
         lo, hi = locate(c, st.mode, d0, d1, jnp.min(s1.e))
-        s_hi = solve_at(model, c, st.mode, hi, tols)
-        e_of = lambda dd: solve_at(model, c, st.mode, dd, tols).e  # noqa: E731
-        e_hi, de_hi = jax.jvp(e_of, (hi,), (jnp.ones_like(hi),))
+        # one solve at hi gives the event functions and their rate (its primal is the solution)
+        s_hi, ds_hi = jax.jvp(lambda dd: solve_at(model, c, st.mode, dd, tols), (hi,), (jnp.ones_like(hi),))
+        e_hi, de_hi = s_hi.e, ds_hi.e
         flag = e_hi < 0
         # one implicit-function step on the earliest event condition: d* carries dd*/dp
         est = jnp.where(flag & (de_hi < 0), hi - e_hi / jnp.where(de_hi < 0, de_hi, -1.0), hi)
@@ -510,8 +510,8 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
         st = _settle(model, st, c, s_star, d_star)
         kinds = jnp.where(st.mode == FREE, 0, s_hi.kind)
         mode, finger, theta, added = _new_contacts(model, st, s_star, kinds, d_star, flag)
+        overflow = jnp.sum(mode > FREE) > S
         if cfg.slip_events or cfg.friction_model == "frictionless":
-            overflow = jnp.sum(mode > FREE) > S
             mode = _test_hypothesis(model, mode, finger, theta, added, d_star, eta, tols)
         # log the events
         nodes = jnp.arange(m)
@@ -528,8 +528,6 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
                     armed=st.armed & ~changed)
         s2 = solve_at(model, c2, mode, d_star, tols)
         st2 = _settle(model, st2, c2, s2, d_star)
-        if not (cfg.slip_events or cfg.friction_model == "frictionless"):
-            overflow = jnp.sum(mode > FREE) > S
         st2 = _finish(st2, s2.ok & s_star.ok)
         # an event that undid itself at the depth it started from (a new contact that pulls at
         # once) would repeat forever: stop with a status instead

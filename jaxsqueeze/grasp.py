@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .engine import CONE_SLACK, Config, Grasp, simulate  # noqa: F401  (simulate: the jittable core)
+from .engine import CONE_SLACK, EVENT_KINDS, Config, Grasp, simulate  # noqa: F401  (simulate: the jittable core)
 from .material import _concrete
 from .operator import Compliance, field_displacement
 from .scene import Scene
@@ -36,7 +36,7 @@ class EventLog(NamedTuple):
 
     def rows(self):
         """List of (depth [m], node, 'A'..'D', finger 1|2) for printing."""
-        return [(float(d), int(n), "ABCD"[int(k)], int(f) + 1)
+        return [(float(d), int(n), EVENT_KINDS[int(k)], int(f) + 1)
                 for d, n, k, f in zip(*(np.asarray(a) for a in self))]
 
 

@@ -17,7 +17,7 @@ from matplotlib.patches import Circle
 from matplotlib.tri import Triangulation
 
 from . import views
-from .views import FREE, SLIP_POS, STICK
+from .views import EVENT_LETTERS, FREE, SLIP_POS, STICK
 
 MM = 1e3
 STICK_COLOR = "tab:blue"
@@ -307,7 +307,7 @@ def plot_events(res) -> Figure:
     axs[1].set_xlabel("squeeze depth d [mm]")
     axs[1].set_xlim(0, float(np.asarray(res.depth)[-1]) * MM * 1.02)
     seq = "".join(e["kind"] for e in ev)
-    counts = ", ".join(f"{k}: {seq.count(k)}" for k in "ABCD")
+    counts = ", ".join(f"{k}: {seq.count(k)}" for k in EVENT_LETTERS)
     fig.suptitle(f"Contact events ({len(ev)} in all; {counts})")
     return fig
 

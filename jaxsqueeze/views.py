@@ -21,9 +21,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .engine import FREE, SLIP_NEG, SLIP_POS, STICK  # noqa: E402,F401  (one definition of the modes)
+from .engine import EVENT_KINDS, FREE, SLIP_NEG, SLIP_POS, STICK  # noqa: E402,F401  (one definition of the modes)
 MODE_NAMES = {FREE: "free", STICK: "stick", SLIP_POS: "slip+", SLIP_NEG: "slip-"}
-EVENT_LETTERS = "ABCD"
+EVENT_LETTERS = EVENT_KINDS   # A new contact, B break, C stick→slip, D slip→stick
 EVENT_MEANING = {"A": "new contact", "B": "contact break", "C": "stick to slip", "D": "slip to stick"}
 
 
