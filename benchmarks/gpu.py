@@ -54,7 +54,7 @@ def main(argv=None):
     jax.config.update("jax_enable_x64", not a.x32)
     import jax.numpy as jnp
 
-    from jaxsqueeze import grasp as G
+    from jaxsqueeze.simulation import api as G
     from squeeze import foam, load1, machine
 
     info = machine()

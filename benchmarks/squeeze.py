@@ -60,7 +60,7 @@ def load1() -> float:
 
 def foam(max_edge=None, refine_edge=None, **changes):
     """The demo scene, with an optional mesh override and scene changes."""
-    from jaxsqueeze.scenefile import load
+    from jaxsqueeze.io.scenefile import load
     sc = load(SCENE, max_edge=max_edge, refine_edge=refine_edge).scene
     return sc.replace(**changes) if changes else sc
 
@@ -89,7 +89,7 @@ def grip_of(mesh, a=(-0.005, -0.05), b=(0.005, 0.05)):
 
 
 def core_inputs(scene):
-    from jaxsqueeze import grasp as G
+    from jaxsqueeze.simulation import api as G
     op = scene.operator()
     return dataclasses.replace(op, field=None), G.grasp_of(scene, op), G.config_of(scene)
 
@@ -98,7 +98,7 @@ def time_core(scene, reps=3):
     """Median wall time of the jitted core (already compiled) and its final state."""
     import jax
 
-    from jaxsqueeze import grasp as G
+    from jaxsqueeze.simulation import api as G
     op0, gr, cfg = core_inputs(scene)
     ts = []
     for _ in range(reps):

@@ -1,7 +1,7 @@
 """``python -m jaxsqueeze``: the same as the ``jaxsqueeze`` command."""
 import sys
 
-from .cli import main
+from .io.cli import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -3,7 +3,7 @@ import numpy as np
 import triangle
 
 import jaxsqueeze as jsq
-from jaxsqueeze import linalg
+from jaxsqueeze.mechanics import linalg
 
 
 def symmetric_square(a=0.1, max_edge=0.005):

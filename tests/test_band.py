@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from jaxsqueeze import curves
-from jaxsqueeze.band import NQ, Band, band_compliance, band_pinv, band_stiffness, element_stiffness
-from jaxsqueeze.operator import Compliance
+from jaxsqueeze.geometry import curves
+from jaxsqueeze.mechanics.band import NQ, Band, band_compliance, band_pinv, band_stiffness, element_stiffness
+from jaxsqueeze.mechanics.operator import Compliance
 
 
 def _scaled(band, K):

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
-from jaxsqueeze import cli, cones, curves, scenefile
-from jaxsqueeze.band import Band
-from jaxsqueeze.scene import compliance_of, nearest_boundary_node
+from jaxsqueeze.geometry import curves
+from jaxsqueeze.io import cli, scenefile
+from jaxsqueeze.post import cones
+from jaxsqueeze.mechanics.band import Band
+from jaxsqueeze.simulation.scene import compliance_of, nearest_boundary_node
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = {"heart": ("heart_band.toml", 0.10), "leaf": ("leaf_band.toml", 0.11)}

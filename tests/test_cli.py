@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
-from jaxsqueeze import cli, scenefile, views
+from jaxsqueeze.io import cli, scenefile
+from jaxsqueeze.post import views
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

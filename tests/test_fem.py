@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
-import jaxsqueeze.shapes as shapes
-from jaxsqueeze import bordered, fem
-from jaxsqueeze.material import Material
+from jaxsqueeze.geometry import shapes
+from jaxsqueeze.mechanics import bordered, fem
+from jaxsqueeze.mechanics.material import Material
 
 MAT = Material(E=2.5e6, nu=0.35, thickness=0.01)
 METHODS = ("sparse", "dense", "spectral")

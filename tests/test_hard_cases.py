@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
-from jaxsqueeze import cli, grasp as grasp_mod, scenefile
-from jaxsqueeze.engine import CONE_SLACK
+from jaxsqueeze.io import cli, scenefile
+from jaxsqueeze.simulation import api as grasp_mod
+from jaxsqueeze.simulation.laws import CONE_SLACK
 from physics import check_states, nearest, symmetric_square
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -572,7 +573,7 @@ def test_unresolvable_contact_stops_with_stalled():
     """The foam square gripped frictionlessly near a corner (bottom/top nodes at x ≈ -38 mm):
     at 7.3 mm a node enters finger 1 but, made a contact, would pull (the frictionless neutral
     modes, docs/numerics.md). The squeeze stops at once with STALLED and advice, never loops."""
-    from jaxsqueeze import scenefile
+    from jaxsqueeze.io import scenefile
 
     scene = scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", "foam_square.toml")).scene
     b = np.asarray(scene.mesh.boundary)

@@ -3,8 +3,8 @@ import meshio
 import numpy as np
 import pytest
 
-from jaxsqueeze import shapes
-from jaxsqueeze.mesh import Mesh, read_mesh, write_mesh
+from jaxsqueeze.geometry import shapes
+from jaxsqueeze.geometry.mesh import Mesh, read_mesh, write_mesh
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 SQUARE_TRI = np.array([[0, 1, 2], [0, 2, 3]])

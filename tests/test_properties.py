@@ -18,8 +18,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import jaxsqueeze as jsq
-from jaxsqueeze import grasp as grasp_mod
-from jaxsqueeze.engine import CONE_SLACK
+from jaxsqueeze.simulation import api as grasp_mod
+from jaxsqueeze.simulation.laws import CONE_SLACK
 from physics import check_states
 
 M = 40                      # boundary nodes of every random polygon

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
-from jaxsqueeze import grasp as grasp_mod
+from jaxsqueeze.simulation import api as grasp_mod
 from physics import check_states, nearest, symmetric_square
 
 MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)

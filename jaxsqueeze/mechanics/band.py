@@ -64,7 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from .curves import arclength_params
+from ..geometry.curves import arclength_params
 from .operator import Compliance, FieldMap, rigid_modes
 
 NQ = 5                                                  # Gauss points per element

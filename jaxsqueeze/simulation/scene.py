@@ -8,12 +8,12 @@ from typing import Any
 import jax
 import numpy as np
 
-from .material import Material, _concrete
-from .mesh import Mesh
-from .operator import Compliance
+from ..mechanics.material import Material
+from ..tracing import is_concrete
+from .laws import CONTACT_MODELS, FRICTION_MODELS
+from ..geometry.mesh import Mesh
+from ..mechanics.operator import Compliance
 
-FRICTION_MODELS = ("coulomb", "frictionless", "stick")
-CONTACT_MODELS = ("segment", "point")
 
 
 @dataclass(frozen=True)
@@ -34,11 +34,11 @@ class Fingers:
     rotation: Any = None
 
     def __post_init__(self):
-        if _concrete(self.radius):
+        if is_concrete(self.radius):
             r = np.asarray(self.radius, float)
             if not (np.all(np.isfinite(r)) and np.all(r > 0)):
                 raise ValueError(f"Fingers.radius={self.radius!r} must be a finite length > 0 m.")
-        if self.rotation is not None and _concrete(self.rotation):
+        if self.rotation is not None and is_concrete(self.rotation):
             rot = np.asarray(self.rotation, float)
             if rot.ndim != 2 or rot.shape[0] != 2 or not np.all(np.isfinite(rot)):
                 raise ValueError("Fingers.rotation must be finite polynomial coefficients of shape (2, k): "
@@ -114,15 +114,15 @@ class Scene:
             raise ValueError(f"friction_model={self.friction_model!r}; choose one of {FRICTION_MODELS}.")
         if self.contact not in CONTACT_MODELS:
             raise ValueError(f"contact={self.contact!r}; choose one of {CONTACT_MODELS}.")
-        if _concrete(self.friction):
+        if is_concrete(self.friction):
             mu = np.asarray(self.friction, float)
             if not np.all(np.isfinite(mu)) or np.any(mu < 0):
                 raise ValueError(f"friction={self.friction!r} must be a finite coefficient mu >= 0.")
-        if _concrete(self.depth):
+        if is_concrete(self.depth):
             d = np.asarray(self.depth, float)
             if not np.all(np.isfinite(d)) or np.any(d <= 0):
                 raise ValueError(f"depth={self.depth!r} must be a finite squeeze depth > 0 m.")
-        if _concrete(self.grip):
+        if is_concrete(self.grip):
             g = np.asarray(self.grip)
             if g.shape[-1:] != (2,) or not np.issubdtype(g.dtype, np.integer):
                 raise ValueError(f"grip={self.grip!r} must be two integer boundary node indices (i, j).")
@@ -143,7 +143,7 @@ class Scene:
             raise ValueError("Settings.capacity must be at least 2 (one contact per finger).")
         for name in ("step", "event_tol", "newton_tol", "gap_tol"):
             v = getattr(s, name)
-            if v is not None and _concrete(v) and not (np.isfinite(v) and v > 0):
+            if v is not None and is_concrete(v) and not (np.isfinite(v) and v > 0):
                 raise ValueError(f"Settings.{name}={v!r} must be a finite value > 0 (or None for the default).")
 
     # ------------------------------------------------------------------ object helpers
@@ -175,15 +175,15 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
     ``material.thickness`` must equal it (raises ``ValueError`` otherwise, rather than
     silently using one of two different values).
     """
-    from .fem import compliance
+    from ..mechanics.fem import compliance
 
     solid = isinstance(obj, Mesh)
     if not solid:
-        from .band import Band
+        from ..mechanics.band import Band
 
         if not isinstance(obj, Band):
             raise TypeError(f"Scene.mesh must be a jaxsqueeze Mesh or Band, got {type(obj).__name__}")
-        if _concrete(material.thickness) and not np.allclose(np.asarray(material.thickness, float), obj.height,
+        if is_concrete(material.thickness) and not np.allclose(np.asarray(material.thickness, float), obj.height,
                                                              rtol=1e-9, atol=0.0):
             raise ValueError(f"Material.thickness={material.thickness!r} differs from the band height "
                              f"{obj.height!r} m; for a band both are its out-of-plane extent h "
@@ -194,7 +194,7 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
         if solid:
             op = compliance(obj, material, method)
         else:
-            from .band import band_compliance
+            from ..mechanics.band import band_compliance
             op = band_compliance(obj, 1.0)      # scaled G is independent of E
         _CACHE[key] = hit = (obj, op)
     op = hit[1]

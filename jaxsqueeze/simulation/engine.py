@@ -22,15 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import linalg
-from .bordered import bordered_matrix, slot_dofs
-from .operator import Compliance
+from ..mechanics import linalg
+from ..mechanics.bordered import bordered_matrix, slot_dofs
+from ..mechanics.operator import Compliance
+from . import laws
+from .laws import CONE_SLACK, EVENT_KINDS, FREE, SLIP_NEG, SLIP_POS, STICK  # noqa: F401
 from .status import Status
 
-FREE, STICK, SLIP_POS, SLIP_NEG = 0, 1, 2, 3   # per-node modes; SLIP_POS slides toward larger θ
-EVENT_KINDS = "ABCD"                          # new contact, break, stick→slip, slip→stick
 RUNNING = -1
-CONE_SLACK = 1e-7   # [rad] a force this close to its cone edge counts as inside (round-off)
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -381,13 +380,7 @@ def _neighbours(loops, m):
 
 
 def cone_margin(model: Model, fn, ft):
-    """|f| sin(φ + slack − ψ), ψ the force's angle from the contact normal: > 0 inside the cone.
-
-    Written with sines and cosines so that μ → ∞ (φ → π/2) stays finite; the slack
-    ``CONE_SLACK`` absorbs round-off, the same slack the grip check allows.
-    """
-    a = model.phi + CONE_SLACK
-    return jnp.sin(a) * fn - jnp.cos(a) * jnp.abs(ft)
+    return laws.cone_margin(model.phi, fn, ft)
 
 
 def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols):

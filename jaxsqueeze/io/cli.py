@@ -137,9 +137,10 @@ def main(argv=None) -> int:
 def _simulate(spec, out, args, progress) -> int:
     import numpy as np
 
-    from . import export, views
-    from .grasp import squeeze
-    from .status import Status
+    from ..post import export
+    from ..post import views
+    from ..simulation.api import squeeze
+    from ..simulation.status import Status
 
     scene = spec.scene
     progress.start("operator", f"building the compliance operator ({scene.mesh.n} nodes, "
@@ -153,7 +154,7 @@ def _simulate(spec, out, args, progress) -> int:
     paths = {}
     if not args.no_plots:
         progress.start("plots", "plotting")
-        from . import plots
+        from ..post import plots
 
         paths.update({f"{k}_png": v for k, v in plots.save_all(res, scene, out).items()})
     progress.start("export", "writing ParaView files")
@@ -181,7 +182,7 @@ def _report(s, res, out, np) -> str:
              f"  final depth  {s['final_depth'] * mm:.3f} mm of {s.get('target_depth', np.nan) * mm:.3f} mm "
              f"({100 * s['relative_depth']:.1f} % of the grip distance {s['grip_distance'] * mm:.1f} mm), "
              f"{s['rows']} recorded states"]
-    from .views import EVENT_LETTERS
+    from ..post.views import EVENT_LETTERS
 
     seq = s["event_sequence"]
     counts = ", ".join(f"{k} {seq.count(k)}" for k in EVENT_LETTERS)

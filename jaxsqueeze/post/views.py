@@ -21,10 +21,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .engine import EVENT_KINDS, FREE, SLIP_NEG, SLIP_POS, STICK  # noqa: E402,F401  (one definition of the modes)
-MODE_NAMES = {FREE: "free", STICK: "stick", SLIP_POS: "slip+", SLIP_NEG: "slip-"}
+from ..simulation.laws import EVENT_KINDS, EVENT_MEANING, FREE, MODE_NAMES, SLIP_NEG, SLIP_POS, STICK  # noqa: F401
+
 EVENT_LETTERS = EVENT_KINDS   # A new contact, B break, C stick→slip, D slip→stick
-EVENT_MEANING = {"A": "new contact", "B": "contact break", "C": "stick to slip", "D": "slip to stick"}
 
 
 def _row(res, row: int) -> int:
@@ -286,7 +285,7 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     part from the operator's field map, the rigid part fitted to the recorded boundary
     displacements. ``op`` is ``scene.operator()``; it must carry a field map.
     """
-    from .operator import rigid_modes
+    from ..mechanics.operator import rigid_modes
 
     if op.field is None:
         raise ValueError("the compliance operator has no field map; cannot rebuild the full field")
@@ -311,7 +310,7 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     contact_regions per finger at the final depth (see :func:`contact_regions`; per finger also
     n_stick, n_slip), grip nodes, scene parameters, and ``timings`` [s] if given.
     """
-    from .status import Status
+    from ..simulation.status import Status
 
     st = Status(int(res.status))
     loops = None

@@ -139,7 +139,7 @@ def _rot(v, phi):
 def _unpack(obj):
     """(object geometry or None, operator or None, E or None, mu or None) from a Scene, a
     Band/Mesh, or a Compliance."""
-    from .operator import Compliance
+    from ..mechanics.operator import Compliance
 
     if isinstance(obj, Compliance):
         return None, obj, None, None
@@ -172,8 +172,8 @@ def _bisector_normals(x, loops):
 
 def _band_rotations(band, E, res):
     """(k, m) cross-section rotation phi [rad] of a band at every row (exact, see docstring)."""
-    from .band import band_pinv, band_stiffness
-    from .operator import rigid_modes
+    from ..mechanics.band import band_pinv, band_stiffness
+    from ..mechanics.operator import rigid_modes
 
     K = band_stiffness(band, E)
     X = band_pinv(band, K)
@@ -218,7 +218,7 @@ def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) ->
                          "pass the scene (or object) the result was computed for")
     X = P[None] + U                                                  # (k, m, 2) deformed nodes
     if axis == "surface":
-        from .band import Band
+        from ..mechanics.band import Band
 
         n0 = _bisector_normals(P, loops) if not isinstance(geo, Band) else np.asarray(geo.normals, float)
         if isinstance(geo, Band):

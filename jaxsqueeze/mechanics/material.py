@@ -6,9 +6,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
-
-def _concrete(x) -> bool:
-    return not isinstance(x, jax.core.Tracer)
+from ..tracing import is_concrete
 
 
 @jax.tree_util.register_dataclass
@@ -32,7 +30,7 @@ class Material:
             ("thickness", self.thickness, lambda v: v > 0, "thickness must be > 0 m"),
         )
         for name, value, ok, what in checks:
-            if not _concrete(value):
+            if not is_concrete(value):
                 continue
             v = np.asarray(value, dtype=float)
             if not np.all(np.isfinite(v)):

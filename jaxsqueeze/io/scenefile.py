@@ -85,7 +85,7 @@ from typing import Any
 
 import numpy as np
 
-from .engine import CONE_SLACK
+from ..simulation.laws import CONE_SLACK
 
 try:  # Python >= 3.11
     import tomllib
@@ -251,8 +251,8 @@ def load_text(text: str, base: str = ".", max_edge: float | None = None,
 def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float | None = None,
               refine_edge: float | None = None) -> SceneSpec:
     """Build a :class:`SceneSpec` from parsed TOML data."""
-    from .material import Material
-    from .scene import Fingers, Scene, Settings
+    from ..mechanics.material import Material
+    from ..simulation.scene import Fingers, Scene, Settings
 
     _unknown("", data, set(TABLES) | set(TOP_KEYS))
     for t in REQUIRED_TABLES:
@@ -348,7 +348,7 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
         mesh = _object(data["object"], base, grip_points, (max_edge, refine_edge))
 
     # grip → nodes
-    from .scene import nearest_boundary_node
+    from ..simulation.scene import nearest_boundary_node
     if grip_points is not None:
         grip = tuple(nearest_boundary_node(mesh, p) for p in grip_points)
         if grip[0] == grip[1]:
@@ -416,8 +416,8 @@ def _check_cones(scene, key):
 
 def _band(obj, height, overrides=(None, None)):
     """A :class:`~jaxsqueeze.band.Band` from an ``[object]`` table with ``band = ...``."""
-    from . import curves
-    from .band import Band
+    from ..geometry import curves
+    from ..mechanics.band import Band
 
     _unknown("object", obj, set(BAND_KEYS))
     for k, required in BAND_KEYS.items():
@@ -443,8 +443,8 @@ def _band(obj, height, overrides=(None, None)):
 
 
 def _object(obj, base, grip_points, overrides=(None, None)):
-    from . import shapes
-    from .mesh import read_mesh
+    from ..geometry import shapes
+    from ..geometry.mesh import read_mesh
 
     obj = _table("object", obj)
     has_shape, has_file = "shape" in obj, "mesh_file" in obj

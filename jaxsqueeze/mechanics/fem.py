@@ -17,7 +17,7 @@ from jax.experimental import sparse as jsparse
 from threadpoolctl import threadpool_limits
 
 from .material import Material
-from .mesh import Mesh
+from ..geometry.mesh import Mesh
 from .operator import Compliance, FieldMap, rigid_modes
 
 METHODS = ("sparse", "dense", "spectral")

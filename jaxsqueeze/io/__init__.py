@@ -1,0 +1,1 @@
+"""Input/output layer: TOML scene files and the command line."""

@@ -1,0 +1,1 @@
+"""Post-processing layer: views (pure numpy), cone rotation, plots and ParaView export."""
