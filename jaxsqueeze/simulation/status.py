@@ -8,7 +8,7 @@ class Status(enum.IntEnum):
     """Status of a squeeze. Stored as an int32 in results so ``vmap`` keeps working."""
 
     SUCCESS = 0          #: target depth reached
-    SLIP_FAILURE = 1     #: every contact on one finger slides, or a finger lost all contact
+    SLIP_FAILURE = 1     #: every contact on one finger slides
     MAX_STEPS = 2        #: step bound reached before the target depth
     NEWTON_FAILURE = 3   #: slip-angle Newton solve did not converge
     OVERFLOW = 4         #: more contact nodes than slots (raise ``capacity``)
@@ -16,6 +16,8 @@ class Status(enum.IntEnum):
     EVENT_OVERFLOW = 6   #: the event log is full (raise ``max_events``)
     INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone
     STALLED = 8          #: a contact event undid itself at one depth (no consistent contact set)
+    LOST_CONTACT = 9     #: a grasping finger lost all of its contacts (the object fell out)
+    INVALID_INPUT = 10   #: a number of the scene or its settings is invalid (see ``result.invalid``)
 
     def __str__(self) -> str:
         return self.name
@@ -28,6 +30,10 @@ class Status(enum.IntEnum):
 _ADVICE = {
     Status.SUCCESS: "The squeeze reached the target depth.",
     Status.SLIP_FAILURE: "The grasp failed: all contacts on one finger slide. Try more friction or another grip.",
+    Status.LOST_CONTACT: ("The grasp failed: one finger lost all of its contacts (every contact broke, event B). "
+                          "Try another grip or a smaller depth."),
+    Status.INVALID_INPUT: ("An input number is invalid (NaN, infinite, out of range or inconsistent); "
+                           "result.invalid names it. Fix that field of the scene or its settings."),
     Status.MAX_STEPS: "Step bound reached. Raise Settings.max_steps or the step size.",
     Status.NEWTON_FAILURE: "Slip-angle Newton did not converge. Lower Settings.step or raise Settings.newton_iters.",
     Status.OVERFLOW: "More contact nodes than slots. Raise Settings.capacity.",
