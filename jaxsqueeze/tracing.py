@@ -2,8 +2,23 @@
 from __future__ import annotations
 
 import jax
+import numpy as np
 
 
 def is_concrete(x) -> bool:
     """True unless ``x`` (or any leaf of it) is a JAX tracer, i.e. eager validation can read it."""
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(x))
+
+
+def numeric(x) -> bool:
+    """True for a concrete number or array of numbers (what eager validation can check).
+
+    False for tracers and for the placeholders JAX puts in pytree fields while it rebuilds
+    a dataclass (``None``, ``object()``), so ``__post_init__`` checks skip those.
+    """
+    if x is None or not is_concrete(x):
+        return False
+    try:
+        return np.asarray(x).dtype.kind in "biuf"
+    except Exception:      # noqa: BLE001  (anything that is not array-like is not a number)
+        return False

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..geometry import boundary
 from .operator import Compliance, field_displacement
 
 
@@ -63,13 +64,7 @@ class Deformation(NamedTuple):
 
 def boundary_slots(op: Compliance, nodes) -> np.ndarray:
     """Positions of mesh node indices ``nodes`` among the operator's contact-capable nodes."""
-    nodes = np.asarray(nodes).reshape(-1)
-    where = {int(v): i for i, v in enumerate(np.asarray(op.nodes))}
-    missing = [int(v) for v in nodes if int(v) not in where]
-    if missing:
-        raise ValueError(f"node(s) {missing} are not on the boundary; displacements can only be "
-                         f"prescribed at boundary nodes (see mesh.boundary).")
-    return np.array([where[int(v)] for v in nodes])
+    return boundary.positions(np.asarray(op.nodes), np.asarray(nodes).reshape(-1))
 
 
 def slot_dofs(slots: jax.Array) -> jax.Array:

@@ -18,15 +18,19 @@ from jax.custom_batching import custom_vmap
 NEUTRAL_RTOL = 1e-3   # truncation of lstsq: singular values below this fraction count as zero
 
 
-def _one_at_a_time(fn, batched):
+def _one_at_a_time(plain):
     """Batch rule: one system at a time on the CPU, the batched kernel elsewhere (GPU solvers
-    have no such deadlock)."""
+    have no such deadlock). The loop body is the plain function, not the custom_vmap one: a
+    forward-mode tangent batched by ``jax.jacfwd`` then batches only right-hand sides (no
+    batched LU) instead of re-entering this rule forever."""
     def rule(axis_size, in_batched, A, B):
+        if not any(in_batched):       # only tangents are batched (jax.jacfwd): one system
+            return plain(A, B), False
         A = A if in_batched[0] else jnp.broadcast_to(A, (axis_size,) + A.shape)
         B = B if in_batched[1] else jnp.broadcast_to(B, (axis_size,) + B.shape)
         if jax.default_backend() == "cpu":
-            return lax.map(lambda ab: fn(*ab), (A, B)), True
-        return jax.vmap(batched)(A, B), True
+            return lax.map(lambda ab: plain(*ab), (A, B)), True
+        return jax.vmap(plain)(A, B), True
     return rule
 
 
@@ -45,8 +49,8 @@ def lstsq(A: jax.Array, B: jax.Array) -> jax.Array:
     return jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B
 
 
-solve.def_vmap(_one_at_a_time(solve, jnp.linalg.solve))
-lstsq.def_vmap(_one_at_a_time(lstsq, lambda A, B: jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B))
+solve.def_vmap(_one_at_a_time(jnp.linalg.solve))
+lstsq.def_vmap(_one_at_a_time(lambda A, B: jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B))
 
 
 def inv(A: jax.Array) -> jax.Array:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
-from ..tracing import is_concrete
+from ..tracing import numeric
 
 
 @jax.tree_util.register_dataclass
@@ -30,7 +30,7 @@ class Material:
             ("thickness", self.thickness, lambda v: v > 0, "thickness must be > 0 m"),
         )
         for name, value, ok, what in checks:
-            if not is_concrete(value):
+            if not numeric(value):
                 continue
             v = np.asarray(value, dtype=float)
             if not np.all(np.isfinite(v)):

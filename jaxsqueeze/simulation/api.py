@@ -11,8 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .engine import Config, Grasp, simulate
-from .laws import CONE_SLACK
-from .result import EventLog, SqueezeResult, to_result, trim  # noqa: F401
+from . import laws
+from . import validate
+from ..geometry import boundary
+from .result import EventLog, SqueezeResult, to_result  # noqa: F401
+from .result import trim as trim_result
 from ..tracing import is_concrete
 from ..mechanics.operator import Compliance, field_displacement
 from .scene import Scene
@@ -30,69 +33,105 @@ def config_of(scene: Scene) -> Config:
 
 
 def grasp_of(scene: Scene, op: Compliance) -> Grasp:
+    """The traced numbers of a scene in SI, with the defaults of :class:`Settings` filled in
+    and the grip as boundary positions (−1 for a node that is not on the boundary)."""
     dt = op.G.dtype
     f64 = dt == jnp.float64
-    L = float(op.length)
+    L = op.length
     s = scene.settings
     depth = jnp.asarray(scene.depth, dt)
     step = jnp.asarray(s.step, dt) if s.step is not None else depth / 50
     event_tol = jnp.asarray(s.event_tol, dt) if s.event_tol is not None else step * 1e-4
     newton_tol = s.newton_tol if s.newton_tol is not None else (1e-11 if f64 else 1e-5)
     gap_tol = s.gap_tol if s.gap_tol is not None else (1e-9 if f64 else 1e-5) * L
-    pos = np.full(int(np.max(np.asarray(op.nodes))) + 1, -1)
-    pos[np.asarray(op.nodes)] = np.arange(op.m)
-    grip = jnp.asarray(pos)[jnp.asarray(scene.grip)]
+    nodes = scene.boundary_nodes()
+    table = boundary.position_table(nodes, int(np.max(nodes)) + 1)
+    grip = boundary.lookup(table, scene.grip)
     rot = scene.fingers.rotation
     rot = jnp.zeros((2, 1), dt) if rot is None else jnp.asarray(rot, dt)
-    return Grasp(grip=grip, radius=jnp.asarray(scene.fingers.radius, dt), mu=jnp.asarray(scene.friction, dt),
-                 depth=depth, step=step, event_tol=event_tol, newton_tol=jnp.asarray(newton_tol, dt),
-                 gap_tol=jnp.asarray(gap_tol, dt), rotation=rot)
+    g = Grasp(grip=grip, radius=jnp.asarray(scene.fingers.radius, dt), mu=jnp.asarray(scene.friction, dt),
+              depth=depth, step=step, event_tol=event_tol, newton_tol=jnp.asarray(newton_tol, dt),
+              gap_tol=jnp.asarray(gap_tol, dt), rotation=rot, invalid=jnp.array(-1, jnp.int32))
+    return dataclasses.replace(g, invalid=invalid_index(g, scene, op))
+
+
+def invalid_index(grasp: Grasp, scene: Scene, op: Compliance) -> jax.Array:
+    """The traced validation of a scene's numbers (see :mod:`jaxsqueeze.simulation.validate`)."""
+    return validate.invalid_index(validate_values(grasp, scene, op))
+
+
+def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
+    """The numbers :mod:`~jaxsqueeze.simulation.validate` checks, by field name."""
+    P = op.points * op.length
+    gp = P[jnp.clip(grasp.grip, 0, op.m - 1)]
+    return {"material.E": scene.material.E, "material.nu": scene.material.nu,
+            "material.thickness": scene.material.thickness, "fingers.radius": grasp.radius,
+            "friction": grasp.mu, "depth": grasp.depth, "settings.step": grasp.step,
+            "settings.event_tol": grasp.event_tol, "settings.newton_tol": grasp.newton_tol,
+            "settings.gap_tol": grasp.gap_tol, "grip_slots": grasp.grip,
+            "grip_distance": jnp.linalg.norm(gp[1] - gp[0]), "fingers.rotation": grasp.rotation}
 
 
 @partial(jax.jit, static_argnames=("cfg",))
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
     st = simulate(op, grasp, cfg)
-    return to_result(st, op, grasp.radius), st.F.reshape(-1), st.g
+    return to_result(st, op, grasp), st.F.reshape(-1), st.g
 
 
-def squeeze(scene: Scene) -> SqueezeResult:
+def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, trim: bool = True) -> SqueezeResult:
     """Follow a two-finger squeeze from first touch to the target depth (Section IV).
 
+    Args:
+        scene: the :class:`Scene`.
+        op: its compliance operator, if already built (``scene.operator()``); built (and
+            cached per object) when omitted. A given operator fixes ν: for derivatives in ν
+            omit it (the operator is then built inside the trace with the dense build).
+        throw: raise ``RuntimeError`` with advice unless the squeeze reached its target
+            depth (``result.raise_for_status()``); only for eager calls.
+        trim: eager calls return the valid rows only, as numpy arrays (see
+            :class:`SqueezeResult`); ``False`` keeps the fixed-capacity padding.
+
     Runs one compiled ``lax.while_loop``; a second call with new numbers (grip, friction,
-    depth, radius, material E) reuses the compiled program. Works under ``jax.vmap`` and
-    forward-mode differentiation (``jax.jvp``/``jax.jacfwd``) over the scene's numbers.
-    Inspect ``result.status`` (or call ``result.raise_for_status()``): a failed grasp is an
-    outcome, not an exception.
+    depth, radius, material, tolerances) reuses the compiled program. Works under ``jax.jit``,
+    ``jax.vmap`` and forward-mode differentiation (``jax.jvp``/``jax.jacfwd``) over every
+    number of the scene (E, ν, thickness, μ, radius, depth, rotation coefficients).
+    Eagerly, invalid input raises ``ValueError`` naming every bad field; under tracing it
+    gives ``Status.INVALID_INPUT`` with ``result.invalid`` naming the field.
     """
-    op = scene.operator()
-    if is_concrete(scene.grip) and is_concrete(scene.friction):
+    op = scene.operator() if op is None else op
+    concrete = is_concrete(scene)
+    if concrete:
         check_grip(scene, op)
     cfg = config_of(scene)
-    res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp_of(scene, op), cfg)
+    grasp = grasp_of(scene, op)
+    if concrete:
+        validate.raise_if_invalid(validate_values(grasp, scene, op))
+    res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     if op.field is not None:
         res = dataclasses.replace(res, displacement=field_displacement(op, F_hat, g_hat) * op.length)
-    if np.ndim(res.count) == 0 and all(map(is_concrete, jax.tree.leaves(res))):   # eager, unbatched
-        res = trim(res)
+    if trim and np.ndim(res.count) == 0 and is_concrete(res):   # eager, unbatched
+        res = trim_result(res)
+    if throw:
+        res.raise_for_status()
     return res
 
 
 def check_grip(scene: Scene, op: Compliance) -> None:
-    """Raise if the segment between the initial contacts leaves either friction cone."""
+    """Raise ``ValueError`` if the segment between the initial contacts leaves either friction
+    cone (Section I-A; the test is :func:`laws.grip_cone_angles`, the one the engine runs)."""
     g = np.asarray(scene.grip)
     if g.ndim != 1 or scene.friction_model == "stick":   # full stick: the cones are half-planes
         return
-    pos = {int(v): k for k, v in enumerate(np.asarray(op.nodes))}
-    i, j = pos[int(g[0])], pos[int(g[1])]
-    P, N = np.asarray(op.points), np.asarray(op.normals)
-    seg = (P[j] - P[i]) / np.linalg.norm(P[j] - P[i])
-    ang = np.degrees(np.arccos(np.clip([-N[i] @ seg, N[j] @ seg], -1, 1)))
-    half = np.degrees(np.arctan(float(scene.friction))) if scene.friction_model == "coulomb" else 0.0
-    if np.any(ang > half + np.degrees(CONE_SLACK)):
+    k = boundary.positions(scene.boundary_nodes(), g)
+    P, N = np.asarray(op.points, float), np.asarray(op.normals, float)
+    ang = laws.grip_cone_angles(P[k], -N[k], xp=np)
+    half = float(laws.friction_angle(float(scene.friction), scene.friction_model)) \
+        if scene.friction_model == "coulomb" else 0.0
+    if np.any(ang > half + laws.CONE_SLACK):
+        a, b = np.degrees(ang)
         raise ValueError(
-            f"grip {tuple(int(v) for v in g)}: the segment between the two contacts makes {ang[0]:.3g}° and "
-            f"{ang[1]:.3g}° with the inward normals, but the friction cones only allow {half:.3g}° "
+            f"grip {tuple(int(v) for v in g)}: the segment between the two contacts makes {a:.3g}° and "
+            f"{b:.3g}° with the inward normals, but the friction cones only allow {np.degrees(half):.3g}° "
             f"(mu={float(scene.friction):.3g}, friction_model={scene.friction_model!r}). Pick more nearly "
             "opposite nodes (e.g. Scene.nearest_boundary_node) or raise the friction.")
-
-

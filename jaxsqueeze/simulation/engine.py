@@ -19,7 +19,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import lax
 
 from ..mechanics import linalg
@@ -27,6 +26,7 @@ from ..mechanics.bordered import bordered_matrix, slot_dofs
 from ..mechanics.operator import Compliance
 from . import laws
 from .laws import CONE_SLACK, EVENT_KINDS, FREE, SLIP_NEG, SLIP_POS, STICK  # noqa: F401
+from ..geometry import boundary
 from .status import Status
 
 RUNNING = -1
@@ -64,6 +64,7 @@ class Grasp:
     radius: fingertip radius [m]; mu: friction coefficient; depth: target depth [m];
     step: squeeze step [m]; event_tol: event bracket width [m]; newton_tol: [rad];
     gap_tol: penetration tolerance [m]; rotation: (2, k) polynomial coefficients of α_i(d).
+    invalid: () int32 index of the first invalid input (``validate.FIELDS``), -1 when valid.
     """
 
     grip: jax.Array
@@ -75,6 +76,7 @@ class Grasp:
     newton_tol: jax.Array
     gap_tol: jax.Array
     rotation: jax.Array
+    invalid: jax.Array
 
 
 def unit(a):
@@ -86,7 +88,7 @@ def cross2(a, b):
 
 
 class Model(NamedTuple):
-    """Everything fixed during one squeeze, in scaled units."""
+    """Everything fixed during one squeeze, in scaled units (lengths / L)."""
 
     op: Compliance
     cfg: Config
@@ -98,6 +100,14 @@ class Model(NamedTuple):
     mu: jax.Array
     L: jax.Array
     rotation: jax.Array  # (2, k), SI
+    grip: jax.Array      # (2,) boundary positions of the grip nodes (clipped to a valid index)
+    D: jax.Array         # target depth
+    h: jax.Array         # squeeze step
+    ev_tol: jax.Array    # event bracket width
+    newton_tol: jax.Array  # [rad]
+    gap_tol: jax.Array
+    eta: jax.Array       # probe offset past an event (stick-first hypothesis test)
+    invalid: jax.Array   # () int32: index of the first invalid input (-1: all valid)
 
     def centres(self, d):
         return jnp.stack([self.o1, self.o2 + d * self.e])
@@ -110,14 +120,20 @@ class Model(NamedTuple):
 
 def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
     L = op.length
-    p = op.points[grasp.grip]
-    n = op.normals[grasp.grip]
+    dt = op.G.dtype
+    grip = jnp.clip(grasp.grip, 0, op.m - 1)      # an invalid grip is reported, never silently used
+    p = op.points[grip]
+    n = op.normals[grip]
     r = grasp.radius / L
     o = p + r * n
     e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
-    mu = jnp.asarray(grasp.mu, op.G.dtype)
+    mu = jnp.asarray(grasp.mu, dt)
     phi = jnp.arctan(mu) if cfg.friction_model == "coulomb" else jnp.zeros_like(mu)
-    return Model(op, cfg, o[0], o[1], e, r, phi, mu, L, jnp.asarray(grasp.rotation, op.G.dtype))
+    h = grasp.step / L
+    eta = jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps)   # probe offset, above round-off in float32
+    return Model(op, cfg, o[0], o[1], e, r, phi, mu, L, jnp.asarray(grasp.rotation, dt), grip,
+                 grasp.depth / L, h, grasp.event_tol / L, grasp.newton_tol, grasp.gap_tol / L, eta,
+                 jnp.asarray(grasp.invalid, jnp.int32))
 
 
 # ----------------------------------------------------------------------------- one configuration
@@ -175,14 +191,15 @@ def _lin_solve(model: Model, J, r):
     return linalg.solve(J, r)
 
 
-def slip_angles(model: Model, c: Contacts, d, tol):
+def slip_angles(model: Model, c: Contacts, d):
     """Newton on system S with the Jacobian from ``jax.jacobian``; implicit derivatives.
 
-    Returns (theta (S,), converged bool).
+    Returns (theta (S,), converged bool, iterations (), last update [rad] ()).
     """
+    zero = jnp.zeros((), c.theta0.dtype)
     if not model.cfg.newton:
-        return c.theta0, jnp.array(True)
-    tol = lax.stop_gradient(tol)
+        return c.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero
+    tol = lax.stop_gradient(model.newton_tol)
 
     def newton(R, x0):
         def cond(s):
@@ -193,19 +210,21 @@ def slip_angles(model: Model, c: Contacts, d, tol):
             dx = _lin_solve(model, jax.jacobian(R)(x), R(x))
             return x - dx, it + 1, jnp.max(jnp.abs(dx))
 
-        x, _, dx = lax.while_loop(cond, body, (x0, 0, jnp.array(jnp.inf, x0.dtype)))
-        return x, dx
+        x, it, dx = lax.while_loop(cond, body, (x0, jnp.array(0, jnp.int32), jnp.array(jnp.inf, x0.dtype)))
+        return x, (dx, it.astype(x0.dtype))     # aux in float: it passes through custom_root's jvp
 
     def tangent_solve(g, y):
         return _lin_solve(model, jax.jacobian(g)(y), y)
 
     def solve_s():
-        th, last = lax.custom_root(lambda th: slip_residual(model, c, th, d), c.theta0, newton, tangent_solve,
-                                   has_aux=True)
-        return th, lax.stop_gradient(last) <= tol
+        th, (last, it) = lax.custom_root(lambda th: slip_residual(model, c, th, d), c.theta0, newton,
+                                         tangent_solve, has_aux=True)
+        last = lax.stop_gradient(last)
+        return th, last <= tol, lax.stop_gradient(it).astype(jnp.int32), last
 
     # without sliding contacts system S is empty: every angle is its anchor
-    return lax.cond(jnp.any(c.active & (c.mode >= SLIP_POS)), solve_s, lambda: (c.theta0, jnp.array(True)))
+    return lax.cond(jnp.any(c.active & (c.mode >= SLIP_POS)), solve_s,
+                    lambda: (c.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero))
 
 
 def slip_rates(model: Model, c: Contacts, th, d):
@@ -233,13 +252,14 @@ class Solution(NamedTuple):
     ft: jax.Array       # (m,) tangential force (for the slip sign)
     fn: jax.Array       # (m,) normal force
     rate: jax.Array     # (m,) slip rate along the sliding direction, s·dθ/dε (0 where not sliding)
+    iters: jax.Array    # () Newton iterations
+    resid: jax.Array    # () last Newton update [rad]
 
 
-def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
+def solve_at(model: Model, c: Contacts, mode, d) -> Solution:
     """Solve the configuration at depth ``d`` and evaluate every event function."""
-    newton_tol, gap_tol = grasp_tols
     op, m = model.op, model.op.m
-    th, ok = slip_angles(model, c, d, newton_tol)
+    th, ok, iters, resid = slip_angles(model, c, d)
     f, g = slot_forces(model, c, th, d)
     f = jnp.where(c.active[:, None], f, 0.0)
     u = (op.G[:, c.dofs] @ f.reshape(-1) + op.N @ g).reshape(m, 2)
@@ -248,7 +268,7 @@ def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
     # event A: gap of each free node to the nearest fingertip
     x = op.points + u
     gaps = jnp.linalg.norm(x[:, None, :] - model.centres(d)[None], axis=-1) - model.r
-    eA = jnp.min(gaps, axis=1) + gap_tol
+    eA = jnp.min(gaps, axis=1) + model.gap_tol
     if model.cfg.contact == "point":
         eA = jnp.full_like(eA, jnp.inf)
 
@@ -257,13 +277,13 @@ def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
     if model.cfg.contact == "point":
         # a point contact (Section V-A) has the object's own deformed surface normal as its cone
         # axis: it turns as the band bends (Fig. 3), while the node stays put on the tip
-        axis = -surface_normals(op, x)[c.idx]
+        axis = -boundary.normals(x, op.loops)[c.idx]
     fn = jnp.sum(f * axis, -1)
     ft = cross2(axis, f)            # f · t, t the axis turned by +90°
     stick = c.mode == STICK
     rate = jnp.zeros_like(th)
     if model.cfg.slip_events:
-        margin = cone_margin(model, fn, ft)
+        margin = laws.cone_margin(model.phi, fn, ft)
         rate = jnp.where(c.mode == SLIP_POS, 1.0, jnp.where(c.mode == SLIP_NEG, -1.0, 0.0)) * slip_rates(model, c, th, d)
         other = jnp.where(stick, margin, jnp.where(c.armed, rate, jnp.inf))
         e_slot = jnp.minimum(fn, other)
@@ -277,13 +297,26 @@ def solve_at(model: Model, c: Contacts, mode, d, grasp_tols):
     ft_full = jnp.zeros(m, f.dtype).at[safe].set(ft, mode="drop")
     rate_full = jnp.zeros(m, f.dtype).at[safe].set(rate, mode="drop")
     e = jnp.where((mode == FREE) | (kind > 0), e, jnp.inf)
-    return Solution(th, f, g, ok, u, F, e, kind, ft_full, fn_full, rate_full)
+    return Solution(th, f, g, ok, u, F, e, kind, ft_full, fn_full, rate_full, iters, resid)
 
 
 # ----------------------------------------------------------------------------- loop state
+class Stats(NamedTuple):
+    """What a user needs to trust or tune a run (all () arrays)."""
+
+    steps: jax.Array           # squeeze steps taken (rows without an event)
+    events: jax.Array          # event resolutions (rows with one or more events)
+    newton_iters: jax.Array    # Newton iterations, summed over every solve
+    newton_max: jax.Array      # largest Newton iteration count of one solve
+    bracket_iters: jax.Array   # event-location iterations, summed
+    residual: jax.Array        # largest final Newton update [rad] of an accepted solve
+
+
 @jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class State:
+    """The squeeze loop's state (scaled units). Stages read a state and return a new one."""
+
     d: jax.Array
     mode: jax.Array         # (m,)
     finger: jax.Array       # (m,)
@@ -293,16 +326,18 @@ class State:
     u: jax.Array            # (m, 2)
     g: jax.Array            # (3,)
     it: jax.Array
-    status: jax.Array
+    status: jax.Array       # RUNNING or a Status, decided by finish() only
+    fault: jax.Array        # RUNNING or a structural Status raised by a stage (overflow, stall, ...)
     n_ev: jax.Array
     events: tuple           # depth (E,), node (E,), kind (E,), finger (E,)
-    hist: tuple             # depth (H,), mode, finger, theta (H, m), F, u (H, m, 2), centres (H, 2, 2), alpha (H, 2)
+    hist: tuple             # depth (H,), mode, finger, theta (H, m), F, u (H, m, 2), centres (H, 2, 2), alpha (H, 2), g (H, 3)
     count: jax.Array
+    stats: Stats
 
 
 def _record(model: Model, st: State, row) -> tuple:
     vals = (st.d, st.mode.astype(jnp.int8), st.finger.astype(jnp.int8), st.theta, st.F, st.u,
-            model.centres(st.d), model.angles(st.d))
+            model.centres(st.d), model.angles(st.d), st.g)
     return tuple(h.at[row].set(v) for h, v in zip(st.hist, vals))
 
 
@@ -310,7 +345,10 @@ def _settle(model: Model, st: State, c: Contacts, sol: Solution, d) -> State:
     """Adopt a solved configuration at depth d (slip angles move, anchors stay)."""
     safe = jnp.where(c.active, c.idx, model.op.m)
     theta = st.theta.at[safe].set(sol.th, mode="drop")
-    return dataclasses.replace(st, d=d, theta=theta, F=sol.F, u=sol.u, g=sol.g, armed=_arm(st.armed, sol))
+    s = st.stats
+    stats = s._replace(newton_iters=s.newton_iters + sol.iters, newton_max=jnp.maximum(s.newton_max, sol.iters),
+                       residual=jnp.maximum(s.residual, jnp.where(sol.iters > 0, sol.resid, 0.0)))
+    return _with(st, d=d, theta=theta, F=sol.F, u=sol.u, g=sol.g, armed=_arm(st.armed, sol), stats=stats)
 
 
 def _arm(armed, sol: Solution):
@@ -321,14 +359,12 @@ def _arm(armed, sol: Solution):
     return armed | (sol.rate > 0)
 
 
-def _failure(model: Model, mode, finger):
+def _per_finger(model: Model, mode, finger):
+    """(contacts per finger (2,), sliding contacts per finger (2,))."""
     contact = mode > FREE
     per = jnp.stack([jnp.sum(contact & (finger == k)) for k in (0, 1)])
-    lost = jnp.any(per == 0)
-    if model.cfg.slip_events:
-        slid = jnp.stack([jnp.sum((mode >= SLIP_POS) & (finger == k)) for k in (0, 1)])
-        return lost | jnp.any(slid == per)
-    return lost
+    slid = jnp.stack([jnp.sum((mode >= SLIP_POS) & (finger == k)) for k in (0, 1)])
+    return per, slid
 
 
 def _new_contacts(model: Model, st: State, sol: Solution, kind, d, flag):
@@ -356,66 +392,31 @@ def _new_contacts(model: Model, st: State, sol: Solution, kind, d, flag):
     return mode.astype(jnp.int32), finger.astype(jnp.int32), theta, added
 
 
-def surface_normals(op: Compliance, x):
-    """(m, 2) outward unit normals of the boundary polygon through the positions ``x`` (m, 2).
-
-    Each loop runs with the material on its left, so the outward normal of the chord from the
-    previous to the next node is that chord turned by −90°.
-    """
-    prev, nxt = _neighbours(op.loops, op.m)
-    t = x[nxt] - x[prev]
-    n = jnp.stack([t[:, 1], -t[:, 0]], axis=1)
-    return n / jnp.linalg.norm(n, axis=1, keepdims=True)
-
-
-def _neighbours(loops, m):
-    loops = loops or (m,)
-    prev, nxt, start = [], [], 0
-    for size in loops:
-        k = np.arange(size)
-        prev.append(start + (k - 1) % size)
-        nxt.append(start + (k + 1) % size)
-        start += size
-    return np.concatenate(prev), np.concatenate(nxt)
-
-
-def cone_margin(model: Model, fn, ft):
-    return laws.cone_margin(model.phi, fn, ft)
-
-
-def _test_hypothesis(model: Model, mode, finger, theta, added, d, eta, tols):
+def _test_hypothesis(model: Model, mode, finger, theta, added, d):
     """New contacts stick first; one whose force leaves the cone (or pulls) is changed.
 
     A contact that found no slot (overflow) is left alone: the caller reports
     ``Status.OVERFLOW``.
     """
     c = pack(model, mode, finger, theta)
-    sol = solve_at(model, c, mode, d + eta, tols)
+    sol = solve_at(model, c, mode, d + model.eta)
     slotted = jnp.zeros(mode.shape, bool).at[jnp.where(c.active, c.idx, mode.shape[0])].set(True, mode="drop")
     pull = added & slotted & (sol.fn <= 0)
     mode = jnp.where(pull, FREE, mode)
     if model.cfg.slip_events:
-        out = added & slotted & ~pull & (cone_margin(model, sol.fn, sol.ft) < 0)
+        out = added & slotted & ~pull & (laws.cone_margin(model.phi, sol.fn, sol.ft) < 0)
         mode = jnp.where(out, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
     return mode.astype(jnp.int32)
 
 
-def simulate(op: Compliance, grasp: Grasp, cfg: Config):
-    """The jittable core of :func:`jaxsqueeze.squeeze`: a ``lax.while_loop`` over steps.
-
-    Returns the final :class:`State` (scaled units; history and event log padded).
-    """
-    model = make_model(op, grasp, cfg)
-    L = op.length
+# ----------------------------------------------------------------------------- the stages
+def init(model: Model) -> State:
+    """First touch (d = 0): the grip nodes in contact (stick first, or sliding when frictionless),
+    the grip's cone test, the first solve and the first recorded row."""
+    op, cfg = model.op, model.cfg
     dt = op.G.dtype
-    m, S = op.m, cfg.capacity
-    D, h = grasp.depth / L, grasp.step / L
-    tols = (grasp.newton_tol, grasp.gap_tol / L)
-    ev_tol = grasp.event_tol / L
-    eta = jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps)   # probe offset, above round-off in float32
-
-    # initial contacts: the grip nodes, sticking (or sliding when frictionless)
-    i, j = grasp.grip[0], grasp.grip[1]
+    m = op.m
+    i, j = model.grip[0], model.grip[1]
     P = op.points
     C0 = model.centres(jnp.zeros((), dt))
     a0 = model.angles(jnp.zeros((), dt))
@@ -425,127 +426,156 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config):
     ang = lambda k, f: jnp.arctan2(*(P[k] - C0[f])[::-1]) - a0[f]  # noqa: E731
     theta = jnp.zeros(m, dt).at[i].set(ang(i, 0)).at[j].set(ang(j, 1))
     added = jnp.zeros(m, bool).at[i].set(True).at[j].set(True)
-    mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt), eta, tols) \
-        if cfg.slip_events else mode
+    if cfg.slip_events:
+        mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt))
 
-    # the segment between the initial contacts must lie inside both friction cones
-    seg = (P[j] - P[i]) / jnp.linalg.norm(P[j] - P[i])
-    inward = -op.normals[grasp.grip]
-    angles = jnp.arccos(jnp.clip(jnp.array([inward[0] @ seg, -(inward[1] @ seg)]), -1.0, 1.0))
-    feasible = jnp.all(angles <= model.phi + CONE_SLACK) | (cfg.friction_model == "stick")
+    # the segment between the initial contacts must lie inside both friction cones (Section I-A)
+    feasible = laws.grip_feasible(P[model.grip], -op.normals[model.grip], model.phi)
+    feasible = feasible | (cfg.friction_model == "stick")
 
     E, H = cfg.max_events, cfg.max_steps + 1
     z = jnp.zeros
-    st = State(jnp.zeros((), dt), mode, finger, theta, jnp.zeros(m, bool), z((m, 2), dt), z((m, 2), dt), z(3, dt),
-               jnp.array(0, jnp.int32), jnp.array(RUNNING, jnp.int32), jnp.array(0, jnp.int32),
+    i32 = lambda v: jnp.array(v, jnp.int32)  # noqa: E731
+    zero = z((), dt)
+    st = State(zero, mode, finger, theta, z(m, bool), z((m, 2), dt), z((m, 2), dt), z(3, dt),
+               i32(0), i32(RUNNING), i32(RUNNING), i32(0),
                (z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
                (z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
-                z((H, m, 2), dt), z((H, 2, 2), dt), z((H, 2), dt)),
-               jnp.array(1, jnp.int32))
+                z((H, m, 2), dt), z((H, 2, 2), dt), z((H, 2), dt), z((H, 3), dt)),
+               i32(0), Stats(i32(0), i32(0), i32(0), i32(0), i32(0), zero))
     c = pack(model, st.mode, st.finger, st.theta)
-    sol = solve_at(model, c, st.mode, st.d, tols)
+    sol = solve_at(model, c, st.mode, st.d)
     st = _settle(model, st, c, sol, st.d)
-    st = _with(st, hist=_record(model, st, 0))
-    status0 = jnp.where(~feasible, Status.INFEASIBLE_GRIP,
-                        jnp.where(_failure(model, st.mode, st.finger), Status.SLIP_FAILURE, RUNNING))
-    st = _with(st, status=jnp.asarray(status0, jnp.int32))
+    fault = jnp.where(model.invalid >= 0, Status.INVALID_INPUT, jnp.where(~feasible, Status.INFEASIBLE_GRIP, RUNNING))
+    return finish(model, _with(st, fault=jnp.asarray(fault, jnp.int32), it=i32(-1)), sol.ok)
 
-    def step(st: State) -> State:
-        d0 = st.d
-        d1 = jnp.minimum(d0 + h, D)
-        c = pack(model, st.mode, st.finger, st.theta, st.armed)
-        s1 = solve_at(model, c, st.mode, d1, tols)
-        crossed = jnp.any(s1.e < 0)
-        return lax.cond(crossed, lambda: _event(st, c, s1, d0, d1), lambda: _advance(st, c, s1, d1))
 
-    def _advance(st, c, s1, d1):
-        st = _settle(model, st, c, s1, d1)
-        return _finish(st, s1.ok)
+def step(model: Model, st: State) -> State:
+    """One iteration: propose the next depth; advance to it, or resolve the earliest event."""
+    d0 = st.d
+    d1 = jnp.minimum(d0 + model.h, model.D)
+    c = pack(model, st.mode, st.finger, st.theta, st.armed)
+    s1 = solve_at(model, c, st.mode, d1)
+    crossed = jnp.any(s1.e < 0)
 
-    def locate(c, mode, d0, d1, e1):
-        """Bracket the earliest sign change of min_k e_k(d) in [d0, d1] to ``event_tol``.
+    def advance():
+        st1 = _settle(model, st, c, s1, d1)
+        st1 = _with(st1, stats=st1.stats._replace(steps=st1.stats.steps + 1))
+        return finish(model, st1, s1.ok)
 
-        Illinois regula falsi (superlinear on smooth crossings) safeguarded by bisection.
-        """
-        E = lambda dd: jnp.min(solve_at(model, c, mode, dd, tols).e)  # noqa: E731
-        e0 = E(d0)
+    def event():
+        lo, hi, iters = locate_event(model, c, st.mode, d0, d1, jnp.min(s1.e))
+        st1 = _with(st, stats=st.stats._replace(bracket_iters=st.stats.bracket_iters + iters,
+                                                  events=st.stats.events + 1))
+        return apply_event(model, st1, c, lo, hi)
 
-        def cond(s):
-            lo, hi, *_, it = s
-            return (hi - lo > ev_tol) & (it < cfg.bisect_iters)
+    return lax.cond(crossed, event, advance)
 
-        def body(s):
-            lo, hi, elo, ehi, side, it = s
-            t = elo / (elo - ehi)
-            t = jnp.where(jnp.isfinite(t) & (it % 4 != 3), jnp.clip(t, 0.01, 0.99), 0.5)
-            mid = lo + t * (hi - lo)
-            em = E(mid)
-            hit = em < 0
-            # Illinois: when the same end survives twice, halve its value
-            elo2 = jnp.where(hit, jnp.where(side == -1, 0.5 * elo, elo), em)
-            ehi2 = jnp.where(hit, em, jnp.where(side == 1, 0.5 * ehi, ehi))
-            return (jnp.where(hit, lo, mid), jnp.where(hit, mid, hi), elo2, ehi2,
-                    jnp.where(hit, -1, 1), it + 1)
 
-        lo, hi, *_ = lax.while_loop(cond, body, (d0, d1, jnp.maximum(e0, 0.0), e1, 0, 0))
-        return lo, hi
+def locate_event(model: Model, c: Contacts, mode, d0, d1, e1):
+    """Bracket the earliest sign change of min_k e_k(d) in [d0, d1] to ``event_tol``.
 
-    def _event(st, c, s1, d0, d1):
-        lo, hi = locate(c, st.mode, d0, d1, jnp.min(s1.e))
-        # one solve at hi gives the event functions and their rate (its primal is the solution)
-        s_hi, ds_hi = jax.jvp(lambda dd: solve_at(model, c, st.mode, dd, tols), (hi,), (jnp.ones_like(hi),))
-        e_hi, de_hi = s_hi.e, ds_hi.e
-        flag = e_hi < 0
-        # one implicit-function step on the earliest event condition: d* carries dd*/dp
-        est = jnp.where(flag & (de_hi < 0), hi - e_hi / jnp.where(de_hi < 0, de_hi, -1.0), hi)
-        d_star = jnp.clip(jnp.min(jnp.where(flag, est, jnp.inf)), lo, hi)
-        s_star = solve_at(model, c, st.mode, d_star, tols)
-        st = _settle(model, st, c, s_star, d_star)
-        kinds = jnp.where(st.mode == FREE, 0, s_hi.kind)
-        mode, finger, theta, added = _new_contacts(model, st, s_star, kinds, d_star, flag)
-        overflow = jnp.sum(mode > FREE) > S
-        if cfg.slip_events or cfg.friction_model == "frictionless":
-            mode = _test_hypothesis(model, mode, finger, theta, added, d_star, eta, tols)
-        # log the events
-        nodes = jnp.arange(m)
-        order = jnp.cumsum(flag) - 1 + st.n_ev
-        slot = jnp.where(flag & (order < E), order, E)
-        ev_d, ev_n, ev_k, ev_f = st.events
-        events = (ev_d.at[slot].set(d_star, mode="drop"), ev_n.at[slot].set(op.nodes[nodes].astype(jnp.int32), mode="drop"),
-                  ev_k.at[slot].set(kinds.astype(jnp.int32), mode="drop"), ev_f.at[slot].set(finger, mode="drop"))
-        n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
-        # re-solve with the new modes at d*
-        c2 = pack(model, mode, finger, theta)
-        changed = mode != st.mode
-        st2 = _with(st, mode=mode, finger=finger, theta=theta, events=events, n_ev=n_ev,
-                    armed=st.armed & ~changed)
-        s2 = solve_at(model, c2, mode, d_star, tols)
-        st2 = _settle(model, st2, c2, s2, d_star)
-        st2 = _finish(st2, s2.ok & s_star.ok)
-        # an event that undid itself at the depth it started from (a new contact that pulls at
-        # once) would repeat forever: stop with a status instead
-        stalled = jnp.all(mode == st.mode) & (d_star <= d0)
-        status = jnp.where(overflow, Status.OVERFLOW, jnp.where(n_ev > E, Status.EVENT_OVERFLOW,
-                           jnp.where(stalled & (st2.status == RUNNING), Status.STALLED, st2.status)))
-        return _with(st2, status=status.astype(jnp.int32))
+    Illinois regula falsi (superlinear on smooth crossings) safeguarded by bisection.
+    Returns (lo, hi, iterations).
+    """
+    E = lambda dd: jnp.min(solve_at(model, c, mode, dd).e)  # noqa: E731
+    e0 = E(d0)
 
-    def _finish(st, ok):
-        it = st.it + 1
-        hist = _record(model, _with(st, it=it), st.count)
-        count = st.count + 1
-        finite = jnp.all(jnp.isfinite(st.F)) & jnp.all(jnp.isfinite(st.u))
-        status = jnp.where(~finite, Status.NONFINITE,
-                 jnp.where(~ok, Status.NEWTON_FAILURE,
-                 jnp.where(_failure(model, st.mode, st.finger), Status.SLIP_FAILURE,
-                 jnp.where(st.d >= D * (1 - 1e-12), Status.SUCCESS,
-                 jnp.where(it >= cfg.max_steps, Status.MAX_STEPS, RUNNING))))).astype(jnp.int32)
-        return _with(st, it=it, hist=hist, count=count, status=status)
+    def cond(s):
+        lo, hi, *_, it = s
+        return (hi - lo > model.ev_tol) & (it < model.cfg.bisect_iters)
 
-    st = lax.while_loop(lambda s: s.status == RUNNING, step, st)
-    return st
+    def body(s):
+        lo, hi, elo, ehi, side, it = s
+        t = elo / (elo - ehi)
+        t = jnp.where(jnp.isfinite(t) & (it % 4 != 3), jnp.clip(t, 0.01, 0.99), 0.5)
+        mid = lo + t * (hi - lo)
+        em = E(mid)
+        hit = em < 0
+        # Illinois: when the same end survives twice, halve its value
+        elo2 = jnp.where(hit, jnp.where(side == -1, 0.5 * elo, elo), em)
+        ehi2 = jnp.where(hit, em, jnp.where(side == 1, 0.5 * ehi, ehi))
+        return (jnp.where(hit, lo, mid), jnp.where(hit, mid, hi), elo2, ehi2,
+                jnp.where(hit, -1, 1), it + 1)
+
+    lo, hi, _, _, _, it = lax.while_loop(cond, body, (d0, d1, jnp.maximum(e0, 0.0), e1, 0, jnp.array(0, jnp.int32)))
+    return lo, hi, it
+
+
+def apply_event(model: Model, st: State, c: Contacts, lo, hi) -> State:
+    """Refine the event depth by one implicit-function step (so d* carries dd*/dp), apply every
+    event flagged there, test new contacts by hypothesis, log them and re-solve at d*."""
+    op, m, E = model.op, model.op.m, model.cfg.max_events
+    d0 = st.d
+    # one solve at hi gives the event functions and their rate (its primal is the solution)
+    s_hi, ds_hi = jax.jvp(lambda dd: solve_at(model, c, st.mode, dd), (hi,), (jnp.ones_like(hi),))
+    e_hi, de_hi = s_hi.e, ds_hi.e
+    flag = e_hi < 0
+    est = jnp.where(flag & (de_hi < 0), hi - e_hi / jnp.where(de_hi < 0, de_hi, -1.0), hi)
+    d_star = jnp.clip(jnp.min(jnp.where(flag, est, jnp.inf)), lo, hi)
+    s_star = solve_at(model, c, st.mode, d_star)
+    st = _settle(model, st, c, s_star, d_star)
+    kinds = jnp.where(st.mode == FREE, 0, s_hi.kind)
+    mode, finger, theta, added = _new_contacts(model, st, s_star, kinds, d_star, flag)
+    overflow = jnp.sum(mode > FREE) > model.cfg.capacity
+    if model.cfg.slip_events or model.cfg.friction_model == "frictionless":
+        mode = _test_hypothesis(model, mode, finger, theta, added, d_star)
+    # log the events
+    order = jnp.cumsum(flag) - 1 + st.n_ev
+    slot = jnp.where(flag & (order < E), order, E)
+    ev_d, ev_n, ev_k, ev_f = st.events
+    events = (ev_d.at[slot].set(d_star, mode="drop"), ev_n.at[slot].set(op.nodes.astype(jnp.int32), mode="drop"),
+              ev_k.at[slot].set(kinds.astype(jnp.int32), mode="drop"), ev_f.at[slot].set(finger, mode="drop"))
+    n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
+    # re-solve with the new modes at d*
+    c2 = pack(model, mode, finger, theta)
+    changed = mode != st.mode
+    st2 = _with(st, mode=mode, finger=finger, theta=theta, events=events, n_ev=n_ev, armed=st.armed & ~changed)
+    s2 = solve_at(model, c2, mode, d_star)
+    st2 = _settle(model, st2, c2, s2, d_star)
+    # an event that undid itself at the depth it started from (a new contact that pulls at
+    # once) would repeat forever: stop with a status instead
+    stalled = jnp.all(mode == st.mode) & (d_star <= d0)
+    fault = jnp.where(overflow, Status.OVERFLOW, jnp.where(n_ev > E, Status.EVENT_OVERFLOW,
+                      jnp.where(stalled, Status.STALLED, st2.fault)))
+    return finish(model, _with(st2, fault=fault.astype(jnp.int32)), s2.ok & s_star.ok)
+
+
+def finish(model: Model, st: State, ok) -> State:
+    """Record the row and decide the status: the one place where a status is set.
+
+    Precedence: a structural fault raised by a stage (invalid input, infeasible grip,
+    overflow, event-log overflow, stall), then non-finite values, Newton failure, a finger
+    without contact, a finger whose contacts all slide, the target depth, the step bound.
+    """
+    it = st.it + 1
+    hist = _record(model, st, st.count)
+    finite = jnp.all(jnp.isfinite(st.F)) & jnp.all(jnp.isfinite(st.u))
+    per, slid = _per_finger(model, st.mode, st.finger)
+    lost = jnp.any(per == 0)
+    slip = jnp.any(slid == per) if model.cfg.slip_events else jnp.array(False)
+    status = jnp.where(st.fault != RUNNING, st.fault,
+             jnp.where(~finite, Status.NONFINITE,
+             jnp.where(~ok, Status.NEWTON_FAILURE,
+             jnp.where(lost, Status.LOST_CONTACT,
+             jnp.where(slip, Status.SLIP_FAILURE,
+             jnp.where(st.d >= model.D * (1 - 1e-12), Status.SUCCESS,
+             jnp.where(it >= model.cfg.max_steps, Status.MAX_STEPS, RUNNING)))))))
+    return _with(st, it=it, hist=hist, count=st.count + 1, status=status.astype(jnp.int32))
+
+
+def simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
+    """The jittable core of :func:`jaxsqueeze.squeeze`: ``init``, then ``step`` in a
+    ``lax.while_loop`` until ``finish`` sets a status.
+
+    Returns the final :class:`State` (scaled units; history and event log padded).
+    """
+    model = make_model(op, grasp, cfg)
+    with jax.named_scope("init"):
+        st = init(model)
+    with jax.named_scope("loop"):
+        return lax.while_loop(lambda s: s.status == RUNNING, lambda s: step(model, s), st)
 
 
 def _with(st: State, **kw) -> State:
     return dataclasses.replace(st, **kw)
-
-

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..mechanics.operator import Compliance
+from .engine import Stats
 from .laws import EVENT_KINDS
 from .status import Status
 
@@ -19,7 +20,7 @@ class EventLog(NamedTuple):
 
     depth: (E,) squeeze depth of each event [m]; node: (E,) mesh node index;
     kind: (E,) 0–3 for events A (new contact), B (break), C (stick→slip), D (slip→stick);
-    finger: (E,) 0 for finger 1, 1 for finger 2.
+    finger: (E,) 0 for the still finger, 1 for the moving one.
     """
 
     depth: jax.Array
@@ -31,8 +32,8 @@ class EventLog(NamedTuple):
         return int(np.shape(self.depth)[0])
 
     def rows(self):
-        """List of (depth [m], node, 'A'..'D', finger 1|2) for printing."""
-        return [(float(d), int(n), EVENT_KINDS[int(k)], int(f) + 1)
+        """List of (depth [m], node, 'A'..'D', finger 0|1) for printing."""
+        return [(float(d), int(n), EVENT_KINDS[int(k)], int(f))
                 for d, n, k, f in zip(*(np.asarray(a) for a in self))]
 
 
@@ -41,10 +42,17 @@ class EventLog(NamedTuple):
 class SqueezeResult:
     """Outcome of a squeeze, in SI units, frame of ``mesh.points`` (node centroid at the origin).
 
-    Rows k index the recorded states: the initial touch, every step and every event.
-    Under ``jit``/``vmap`` the arrays keep their fixed capacity and ``count`` / ``n_events``
-    say how many rows are valid (the rest repeat the last state); :func:`squeeze` called
-    eagerly trims them.
+    One type however it was computed. Rows k index the recorded states: the initial touch,
+    every step and every event. The arrays have a fixed capacity (``Settings.max_steps + 1``
+    rows, ``Settings.max_events`` events); ``count`` and ``n_events`` say how many are valid
+    and padding rows repeat the last valid one. :func:`jaxsqueeze.squeeze` called eagerly on
+    one scene returns the result *trimmed* to its valid rows as numpy arrays (``trim=False``
+    keeps the padding); under ``jit``/``vmap``/``jvp`` it is padded. The properties below
+    (``final_depth``, ``final_forces``, ``total_force``, ``outcome``) honour ``count`` and
+    work on both, and under tracing (they return arrays, batched when the result is).
+
+    Fingers are numbered 0 (the still finger, the paper's finger 1) and 1 (the moving
+    finger, the paper's finger 2) everywhere: arrays, event tables and JSON.
 
     status: () int, a :class:`Status` value.
     depth: (k,) squeeze depth [m].
@@ -55,13 +63,18 @@ class SqueezeResult:
     forces: (k, m, 2) contact force each fingertip exerts on the object [N].
     boundary_displacement: (k, m, 2) displacement of the boundary nodes [m].
     centres: (k, 2, 2) fingertip centres [m]; alpha: (k, 2) fingertip rotations [rad].
+    rigid: (k, 3) rigid part g of every row (t_x [m], t_y [m], rotation [rad]).
     events: :class:`EventLog`.
     displacement: (n, 2) displacement of every node at the final depth [m] (None for an
-        operator without a field map).
+        operator without a field map, or when the operator itself is traced).
     g: (3,) final rigid part (t_x [m], t_y [m], rotation [rad]).
     count, n_events: () valid rows of the history and of the event log.
     nodes: (m,) mesh node index of each boundary position.
+    grip: (2,) mesh node indices of the two initial contacts (finger 0, finger 1).
     radius: () fingertip radius [m].
+    stats: :class:`~jaxsqueeze.simulation.engine.Stats` (steps, events, Newton and bracket
+        iterations, largest Newton residual).
+    invalid: () int, index into ``validate.FIELDS`` of the first invalid input, -1 if none.
     """
 
     status: jax.Array
@@ -73,62 +86,92 @@ class SqueezeResult:
     boundary_displacement: jax.Array
     centres: jax.Array
     alpha: jax.Array
+    rigid: jax.Array
     events: EventLog
     displacement: jax.Array | None
     g: jax.Array
     count: jax.Array
     n_events: jax.Array
     nodes: jax.Array
+    grip: jax.Array
     radius: jax.Array
+    stats: Stats
+    invalid: jax.Array
 
     @property
     def outcome(self) -> Status:
+        """The status as a :class:`Status` (eager, unbatched results only)."""
         return Status(int(self.status))
 
-    @property
-    def final_depth(self) -> float:
-        return float(np.asarray(self.depth)[int(self.count) - 1])
+    def _last(self, a):
+        """Row ``count - 1`` of a history array (k, ...) or a batch of them (B, k, ...)."""
+        a = jnp.asarray(a)
+        lead = jnp.ndim(self.count)
+        idx = (jnp.asarray(self.count) - 1).reshape(jnp.shape(self.count) + (1,) * (a.ndim - lead))
+        return jnp.take_along_axis(a, idx, axis=lead)[(slice(None),) * lead + (0,)]
 
     @property
-    def total_force(self) -> np.ndarray:
-        """(k, 2, 2) total force of each finger on the object [N], per recorded state."""
-        F = np.asarray(self.forces)
-        fg = np.asarray(self.finger)
-        on = np.asarray(self.modes) > 0
-        return np.stack([np.sum(np.where((on & (fg == k))[..., None], F, 0.0), axis=1) for k in (0, 1)], 1)
+    def final_depth(self) -> jax.Array:
+        """() depth reached [m] (batched: one per member)."""
+        return self._last(self.depth)
+
+    @property
+    def final_forces(self) -> jax.Array:
+        """(m, 2) contact forces at the final row [N]."""
+        return self._last(self.forces)
+
+    @property
+    def total_force(self) -> jax.Array:
+        """(k, 2, 2) total force of each finger (axis -2: finger 0, 1) on the object [N], per row."""
+        F = jnp.asarray(self.forces)
+        fg = jnp.asarray(self.finger)
+        on = jnp.asarray(self.modes) > 0
+        return jnp.stack([jnp.sum(jnp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in (0, 1)], -2)
+
+    @property
+    def grip_force(self) -> jax.Array:
+        """() magnitude of the total force of the still finger at the final row [N]."""
+        return jnp.linalg.norm(self._last(self.total_force)[..., 0, :], axis=-1)
 
     def raise_for_status(self) -> "SqueezeResult":
         """Raise ``RuntimeError`` with advice unless the squeeze reached its target depth."""
         if self.outcome != Status.SUCCESS:
-            raise RuntimeError(f"squeeze ended with {self.outcome.name} at depth {self.final_depth:.6g} m: "
+            raise RuntimeError(f"squeeze ended with {self.outcome.name} at depth {float(self.final_depth):.6g} m: "
                                f"{self.outcome.advice}")
         return self
 
+    def trim(self) -> "SqueezeResult":
+        """This result without its padding rows, as numpy arrays (eager, unbatched only)."""
+        return trim(self)
 
 
-def to_result(st, op: Compliance, radius) -> SqueezeResult:
+def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     """Convert the engine's final state (scaled) into a :class:`SqueezeResult` (SI), padded
     with the last valid row; the full displacement field is left to the caller (None)."""
     L, Fs = op.length, op.force_scale
-    depth, mode, finger, theta, F, u, C, alpha = st.hist
+    depth, mode, finger, theta, F, u, C, alpha, g = st.hist
     k = st.count
     rows = jnp.arange(depth.shape[0])
     last = jnp.minimum(rows, k - 1)                  # pad with the last valid row
     pad = lambda a: a[last]  # noqa: E731
     ev_d, ev_n, ev_k, ev_f = st.events
+    gs = jnp.array([L, L, 1.0], st.g.dtype)
     return SqueezeResult(
         status=st.status, depth=pad(depth) * L, modes=pad(mode), finger=pad(finger), theta=pad(theta),
         forces=pad(F) * Fs, boundary_displacement=pad(u) * L, centres=pad(C) * L, alpha=pad(alpha),
-        events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
-        g=st.g * jnp.array([L, L, 1.0], st.g.dtype), count=k, n_events=st.n_ev, nodes=op.nodes,
-        radius=radius)
+        rigid=pad(g) * gs, events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
+        g=st.g * gs, count=k, n_events=st.n_ev, nodes=op.nodes,
+        grip=jnp.where(grasp.grip >= 0, op.nodes[jnp.clip(grasp.grip, 0, op.m - 1)], -1), radius=grasp.radius,
+        stats=st.stats, invalid=grasp.invalid)
+
+
+HISTORY = ("depth", "modes", "finger", "theta", "forces", "boundary_displacement", "centres", "alpha", "rigid")
 
 
 def trim(res: SqueezeResult) -> SqueezeResult:
     """Drop the padding rows of an unbatched result (as numpy arrays: slicing JAX arrays to a
-    new length would compile a small program per length)."""
+    new length would compile a small program per length). Idempotent."""
     res = jax.tree.map(np.asarray, res)
     k, e = int(res.count), min(int(res.n_events), len(res.events))
-    hist = {f: getattr(res, f)[:k] for f in ("depth", "modes", "finger", "theta", "forces",
-                                              "boundary_displacement", "centres", "alpha")}
+    hist = {f: getattr(res, f)[:k] for f in HISTORY}
     return dataclasses.replace(res, events=EventLog(*(a[:e] for a in res.events)), **hist)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -9,13 +10,14 @@ import jax
 import numpy as np
 
 from ..mechanics.material import Material
-from ..tracing import is_concrete
+from ..tracing import is_concrete, numeric
 from .laws import CONTACT_MODELS, FRICTION_MODELS
 from ..geometry.mesh import Mesh
 from ..mechanics.operator import Compliance
 
 
 
+@jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class Fingers:
     """Two identical round fingertips of radius ``radius`` [m] (Section IV).
@@ -28,23 +30,26 @@ class Fingers:
         polynomial coefficients in d [m], highest power first (``numpy.polyval`` order),
         shape (2, k). Fingertips rotate about their own centres. ``None`` compiles no
         rotation code at all.
+
+    A pytree: ``radius`` and ``rotation`` are leaves (traceable, differentiable).
     """
 
     radius: Any
     rotation: Any = None
 
     def __post_init__(self):
-        if is_concrete(self.radius):
+        if numeric(self.radius):
             r = np.asarray(self.radius, float)
             if not (np.all(np.isfinite(r)) and np.all(r > 0)):
                 raise ValueError(f"Fingers.radius={self.radius!r} must be a finite length > 0 m.")
-        if self.rotation is not None and is_concrete(self.rotation):
+        if self.rotation is not None and numeric(self.rotation):
             rot = np.asarray(self.rotation, float)
             if rot.ndim != 2 or rot.shape[0] != 2 or not np.all(np.isfinite(rot)):
                 raise ValueError("Fingers.rotation must be finite polynomial coefficients of shape (2, k): "
                                  f"one row per finger, highest power first; got shape {rot.shape}.")
 
 
+@jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class Settings:
     """Accuracy and capacity settings of a squeeze. Each is an explicit knob (DESIGN 2.8).
@@ -61,19 +66,23 @@ class Settings:
     max_events: capacity of the event log, static.
     newton_iters: Newton iteration bound, static.
     bisect_iters: iteration bound for locating an event (regula falsi + bisection), static.
+
+    A pytree: the four tolerances are leaves (None = the default), the integers are static
+    (a changed capacity compiles a new program; a changed tolerance does not).
     """
 
     step: float | None = None
     event_tol: float | None = None
     newton_tol: float | None = None
     gap_tol: float | None = None
-    capacity: int = 64
-    max_steps: int = 400
-    max_events: int = 256
-    newton_iters: int = 30
-    bisect_iters: int = 40
+    capacity: int = field(default=64, metadata=dict(static=True))
+    max_steps: int = field(default=400, metadata=dict(static=True))
+    max_events: int = field(default=256, metadata=dict(static=True))
+    newton_iters: int = field(default=30, metadata=dict(static=True))
+    bisect_iters: int = field(default=40, metadata=dict(static=True))
 
 
+@jax.tree_util.register_dataclass
 @dataclass(frozen=True, eq=False)
 class Scene:
     """Everything that defines one squeeze.
@@ -92,21 +101,26 @@ class Scene:
             finger, no event A; for ring-like objects, Section V-A).
         method: compliance build ("sparse", "dense", "spectral"); ignored for bands.
         settings: :class:`Settings`.
+
+    A pytree (MJX's rule: a field is a leaf if and only if it is a number): material,
+    fingers, grip, friction, depth and the settings' tolerances are leaves, so ``jax.jit``,
+    ``jax.vmap`` and ``jax.jacfwd`` apply to a function of any of them and a changed number
+    never recompiles; the object, the model choices and the capacities are static.
     """
 
-    mesh: Any
+    mesh: Any = field(metadata=dict(static=True))
     material: Material
     fingers: Fingers
     grip: Any
     friction: Any = 0.5
     depth: Any = 0.01
-    friction_model: str = "coulomb"
-    contact: str = "segment"
-    method: str = "sparse"
+    friction_model: str = field(default="coulomb", metadata=dict(static=True))
+    contact: str = field(default="segment", metadata=dict(static=True))
+    method: str = field(default="sparse", metadata=dict(static=True))
     settings: Settings = field(default_factory=Settings)
 
     def replace(self, **changes) -> "Scene":
-        """A copy with some fields changed (the compliance cache is shared)."""
+        """A copy with some fields changed (the cached compliance operator is shared)."""
         return dataclasses.replace(self, **changes)
 
     def __post_init__(self):
@@ -114,15 +128,15 @@ class Scene:
             raise ValueError(f"friction_model={self.friction_model!r}; choose one of {FRICTION_MODELS}.")
         if self.contact not in CONTACT_MODELS:
             raise ValueError(f"contact={self.contact!r}; choose one of {CONTACT_MODELS}.")
-        if is_concrete(self.friction):
+        if numeric(self.friction):
             mu = np.asarray(self.friction, float)
             if not np.all(np.isfinite(mu)) or np.any(mu < 0):
                 raise ValueError(f"friction={self.friction!r} must be a finite coefficient mu >= 0.")
-        if is_concrete(self.depth):
+        if numeric(self.depth):
             d = np.asarray(self.depth, float)
             if not np.all(np.isfinite(d)) or np.any(d <= 0):
                 raise ValueError(f"depth={self.depth!r} must be a finite squeeze depth > 0 m.")
-        if is_concrete(self.grip):
+        if numeric(self.grip):
             g = np.asarray(self.grip)
             if g.shape[-1:] != (2,) or not np.issubdtype(g.dtype, np.integer):
                 raise ValueError(f"grip={self.grip!r} must be two integer boundary node indices (i, j).")
@@ -143,7 +157,7 @@ class Scene:
             raise ValueError("Settings.capacity must be at least 2 (one contact per finger).")
         for name in ("step", "event_tol", "newton_tol", "gap_tol"):
             v = getattr(s, name)
-            if v is not None and is_concrete(v) and not (np.isfinite(v) and v > 0):
+            if v is not None and numeric(v) and not (np.isfinite(v) and v > 0):
                 raise ValueError(f"Settings.{name}={v!r} must be a finite value > 0 (or None for the default).")
 
     # ------------------------------------------------------------------ object helpers
@@ -158,15 +172,28 @@ class Scene:
         return nearest_boundary_node(self.mesh, xy)
 
     def operator(self) -> Compliance:
-        """The compliance operator of the object, built once and cached per (object, nu, method)."""
+        """The compliance operator of the object (see :func:`compliance_of`).
+
+        Build it once and pass it on (``jsq.squeeze(scene, op=op)``) to make the reuse
+        explicit; calling this again for the same object, ν and method returns the cached one.
+        """
         return compliance_of(self.mesh, self.material, self.method)
 
 
-_CACHE: dict = {}
+#: at most this many (nu, method) operators are kept per object; the cache entry of an object
+#: goes when the object is garbage collected (a WeakKeyDictionary, never keyed by ``id``)
+CACHE_PER_OBJECT = 4
+_operators: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance:
-    """Cached compliance operator of a mesh or band (E and thickness only rescale it).
+    """Compliance operator of a mesh or band, with E and thickness applied as a scale.
+
+    Solid meshes: the scaled operator depends on ν and the build only, so it is cached per
+    object (weakly: dropping the mesh frees its operators) and per (ν, method), at most
+    ``CACHE_PER_OBJECT`` of them. When ν is being traced (``jax.jvp``/``jacfwd``/``vmap`` over
+    ν) the operator is built inside the trace with the differentiable ``"dense"`` build
+    (JAX Cholesky), uncached, so derivatives in ν are exact.
 
     A band (:class:`~jaxsqueeze.band.Band`) is built once per band object: its scaled
     compliance ``E h T K^+ T^T`` does not depend on E (nor on nu, which a band does not
@@ -183,21 +210,26 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
 
         if not isinstance(obj, Band):
             raise TypeError(f"Scene.mesh must be a jaxsqueeze Mesh or Band, got {type(obj).__name__}")
-        if is_concrete(material.thickness) and not np.allclose(np.asarray(material.thickness, float), obj.height,
-                                                             rtol=1e-9, atol=0.0):
+        if numeric(material.thickness) and not np.allclose(np.asarray(material.thickness, float), obj.height,
+                                                           rtol=1e-9, atol=0.0):
             raise ValueError(f"Material.thickness={material.thickness!r} differs from the band height "
                              f"{obj.height!r} m; for a band both are its out-of-plane extent h "
                              "(use Material(E, nu, thickness=band.height)).")
-    key = (id(obj), float(material.nu) if solid else None, method if solid else "band")
-    hit = _CACHE.get(key)
-    if hit is None or hit[0] is not obj:
-        if solid:
-            op = compliance(obj, material, method)
-        else:
-            from ..mechanics.band import band_compliance
-            op = band_compliance(obj, 1.0)      # scaled G is independent of E
-        _CACHE[key] = hit = (obj, op)
-    op = hit[1]
+    if solid and not is_concrete(material.nu):
+        op = compliance(obj, material, "dense")          # differentiable in nu; not cached
+    else:
+        key = (float(material.nu), method) if solid else ("band",)
+        per = _operators.setdefault(obj, {})
+        op = per.get(key)
+        if op is None:
+            if solid:
+                op = compliance(obj, Material(1.0, material.nu, 1.0), method)
+            else:
+                from ..mechanics.band import band_compliance
+                op = band_compliance(obj, 1.0)      # scaled G is independent of E
+            if len(per) >= CACHE_PER_OBJECT:
+                per.pop(next(iter(per)))
+            per[key] = op
     h = material.thickness if solid else obj.height
     return dataclasses.replace(op, stiffness=jax.numpy.asarray(material.E * h, op.G.dtype))
 
