@@ -395,9 +395,12 @@ def _new_contacts(model: Model, st: State, sol: Solution, kind, d, flag):
 def _test_hypothesis(model: Model, mode, finger, theta, added, d):
     """New contacts stick first; one whose force leaves the cone (or pulls) is changed.
 
+    Frictionless squeezes settle the whole contact set instead (:func:`_settle_frictionless`).
     A contact that found no slot (overflow) is left alone: the caller reports
-    ``Status.OVERFLOW``.
+    ``Status.OVERFLOW``. Returns (mode, finger, theta, unsettled).
     """
+    if model.cfg.friction_model == "frictionless":
+        return _settle_frictionless(model, mode, finger, theta, d)
     c = pack(model, mode, finger, theta)
     sol = solve_at(model, c, mode, d + model.eta)
     slotted = jnp.zeros(mode.shape, bool).at[jnp.where(c.active, c.idx, mode.shape[0])].set(True, mode="drop")
@@ -406,7 +409,44 @@ def _test_hypothesis(model: Model, mode, finger, theta, added, d):
     if model.cfg.slip_events:
         out = added & slotted & ~pull & (laws.cone_margin(model.phi, sol.fn, sol.ft) < 0)
         mode = jnp.where(out, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
-    return mode.astype(jnp.int32)
+    return mode.astype(jnp.int32), finger, theta, jnp.array(False)
+
+
+SETTLE_ITERS = 6   # active-set passes of a frictionless contact set at one depth
+
+
+def _settle_frictionless(model: Model, mode, finger, theta, d):
+    """The frictionless contact set just past depth d, by an active-set iteration at the probe
+    depth d + η: every free node inside a fingertip joins (at the angle where it is), then the
+    most-pulling contact leaves, until the set is consistent (every contact pushes, no free
+    node penetrates) or ``SETTLE_ITERS`` passes. Neighbouring nodes that touch within η of
+    each other join together; without that, a node joining alone beside one on the same side
+    of the centre line would have to pull (a frictionless point-on-circle pair can only push
+    when it straddles that line), be dropped, touch again at once, and stall the squeeze."""
+    dp = d + model.eta
+    m = mode.shape[0]
+
+    def body(_, carry):
+        mode, finger, theta, _ = carry
+        c = pack(model, mode, finger, theta)
+        sol = solve_at(model, c, mode, dp)
+        x = model.op.points + sol.u
+        C = model.centres(dp)
+        dist = jnp.linalg.norm(x[:, None, :] - C[None], axis=-1)
+        near = jnp.argmin(dist, axis=1)
+        inside = (mode == FREE) & (jnp.min(dist, axis=1) - model.r < -model.gap_tol)
+        ang = jnp.arctan2(*(x - C[near]).T[::-1]) - model.angles(dp)[near]
+        slotted = jnp.zeros(m, bool).at[jnp.where(c.active, c.idx, m)].set(True, mode="drop")
+        fn = jnp.where(slotted & (mode > FREE), sol.fn, jnp.inf)
+        worst = jnp.argmin(fn)
+        drop = (jnp.arange(m) == worst) & (fn[worst] <= 0) & ~jnp.any(inside)
+        mode = jnp.where(inside, SLIP_POS, jnp.where(drop, FREE, mode)).astype(jnp.int32)
+        finger = jnp.where(inside, near, finger).astype(jnp.int32)
+        theta = jnp.where(inside, ang, theta)
+        return mode, finger, theta, jnp.any(inside) | jnp.any(drop)
+
+    mode, finger, theta, unsettled = lax.fori_loop(0, SETTLE_ITERS, body, (mode, finger, theta, jnp.array(False)))
+    return mode, finger, theta, unsettled
 
 
 # ----------------------------------------------------------------------------- the stages
@@ -427,7 +467,7 @@ def init(model: Model) -> State:
     theta = jnp.zeros(m, dt).at[i].set(ang(i, 0)).at[j].set(ang(j, 1))
     added = jnp.zeros(m, bool).at[i].set(True).at[j].set(True)
     if cfg.slip_events:
-        mode = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt))
+        mode, finger, theta, _ = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt))
 
     # the segment between the initial contacts must lie inside both friction cones (Section I-A)
     feasible = laws.grip_feasible(P[model.grip], -op.normals[model.grip], model.phi)
@@ -518,8 +558,9 @@ def apply_event(model: Model, st: State, c: Contacts, lo, hi) -> State:
     kinds = jnp.where(st.mode == FREE, 0, s_hi.kind)
     mode, finger, theta, added = _new_contacts(model, st, s_star, kinds, d_star, flag)
     overflow = jnp.sum(mode > FREE) > model.cfg.capacity
+    unsettled = jnp.array(False)
     if model.cfg.slip_events or model.cfg.friction_model == "frictionless":
-        mode = _test_hypothesis(model, mode, finger, theta, added, d_star)
+        mode, finger, theta, unsettled = _test_hypothesis(model, mode, finger, theta, added, d_star)
     # log the events
     order = jnp.cumsum(flag) - 1 + st.n_ev
     slot = jnp.where(flag & (order < E), order, E)
@@ -535,7 +576,7 @@ def apply_event(model: Model, st: State, c: Contacts, lo, hi) -> State:
     st2 = _settle(model, st2, c2, s2, d_star)
     # an event that undid itself at the depth it started from (a new contact that pulls at
     # once) would repeat forever: stop with a status instead
-    stalled = jnp.all(mode == st.mode) & (d_star <= d0)
+    stalled = (jnp.all(mode == st.mode) & (d_star <= d0)) | unsettled
     fault = jnp.where(overflow, Status.OVERFLOW, jnp.where(n_ev > E, Status.EVENT_OVERFLOW,
                       jnp.where(stalled, Status.STALLED, st2.fault)))
     return finish(model, _with(st2, fault=fault.astype(jnp.int32)), s2.ok & s_star.ok)

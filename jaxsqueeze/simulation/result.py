@@ -103,35 +103,42 @@ class SqueezeResult:
         """The status as a :class:`Status` (eager, unbatched results only)."""
         return Status(int(self.status))
 
+    @property
+    def _xp(self):
+        """numpy for a trimmed or host result, jax.numpy for arrays on a device or traced."""
+        return np if isinstance(self.count, (np.ndarray, np.generic, int)) else jnp
+
     def _last(self, a):
         """Row ``count - 1`` of a history array (k, ...) or a batch of them (B, k, ...)."""
-        a = jnp.asarray(a)
-        lead = jnp.ndim(self.count)
-        idx = (jnp.asarray(self.count) - 1).reshape(jnp.shape(self.count) + (1,) * (a.ndim - lead))
-        return jnp.take_along_axis(a, idx, axis=lead)[(slice(None),) * lead + (0,)]
+        xp = self._xp
+        a = xp.asarray(a)
+        lead = np.ndim(self.count)
+        idx = (xp.asarray(self.count) - 1).reshape(np.shape(self.count) + (1,) * (a.ndim - lead))
+        return xp.take_along_axis(a, idx, axis=lead)[(slice(None),) * lead + (0,)]
 
     @property
-    def final_depth(self) -> jax.Array:
+    def final_depth(self):
         """() depth reached [m] (batched: one per member)."""
         return self._last(self.depth)
 
     @property
-    def final_forces(self) -> jax.Array:
+    def final_forces(self):
         """(m, 2) contact forces at the final row [N]."""
         return self._last(self.forces)
 
     @property
-    def total_force(self) -> jax.Array:
+    def total_force(self):
         """(k, 2, 2) total force of each finger (axis -2: finger 0, 1) on the object [N], per row."""
-        F = jnp.asarray(self.forces)
-        fg = jnp.asarray(self.finger)
-        on = jnp.asarray(self.modes) > 0
-        return jnp.stack([jnp.sum(jnp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in (0, 1)], -2)
+        xp = self._xp
+        F = xp.asarray(self.forces)
+        fg = xp.asarray(self.finger)
+        on = xp.asarray(self.modes) > 0
+        return xp.stack([xp.sum(xp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in (0, 1)], -2)
 
     @property
-    def grip_force(self) -> jax.Array:
+    def grip_force(self):
         """() magnitude of the total force of the still finger at the final row [N]."""
-        return jnp.linalg.norm(self._last(self.total_force)[..., 0, :], axis=-1)
+        return self._xp.linalg.norm(self._last(self.total_force)[..., 0, :], axis=-1)
 
     def raise_for_status(self) -> "SqueezeResult":
         """Raise ``RuntimeError`` with advice unless the squeeze reached its target depth."""
