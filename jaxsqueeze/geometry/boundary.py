@@ -6,6 +6,9 @@ on its left. Every module that needs a normal or a position reads it from here.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -65,3 +68,57 @@ def positions(boundary_nodes, nodes) -> np.ndarray:
         raise ValueError(f"node(s) {bad[:8]}{' ...' if len(bad) > 8 else ''} are not on the boundary; "
                          "use boundary nodes (mesh.boundary, or Scene.nearest_boundary_node).")
     return pos
+
+
+# ----------------------------------------------------------------------------- smooth parametrization
+class Curve(NamedTuple):
+    """A periodic C² cubic spline through the nodes of one boundary loop, by chord length s.
+
+    knots: (k + 1,) arc-length parameter of each node, 0 … ``perimeter`` (the first node again
+    at the end); coef: (k, 4, 2) cubic coefficients of x and y on each span, in powers of the
+    local parameter (s − knots[i]), highest first. Arrays only, so a curve is a pytree leaf set
+    that traced code evaluates (:func:`point`), and s can be traced and differentiated.
+    Units are those of the points it was built from.
+    """
+
+    knots: jax.Array
+    coef: jax.Array
+
+    @property
+    def perimeter(self):
+        return self.knots[-1]
+
+
+def curve(x, loops=None, loop: int = 0) -> Curve:
+    """The :class:`Curve` through loop ``loop`` (default the outer one) of boundary points
+    ``x`` (m, 2), which run loop by loop with the material on the left."""
+    from scipy.interpolate import CubicSpline
+
+    x = np.asarray(x, float)
+    loops = tuple(loops) if loops else (x.shape[0],)
+    start = int(np.sum(loops[:loop]))
+    p = x[start:start + loops[loop]]
+    closed = np.vstack([p, p[:1]])
+    knots = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    spline = CubicSpline(knots, closed, bc_type="periodic")
+    return Curve(knots, np.transpose(spline.c, (1, 0, 2)).copy())
+
+
+def point(c: Curve, s):
+    """Position p(s) (..., 2) and outward unit normal n(s) (..., 2) at arc length ``s`` (...,),
+    periodic in the perimeter. C¹ in s (C² for the position), so a fingertip centre
+    p(s) + r n(s) moves smoothly with s between nodes."""
+    knots, coef = jnp.asarray(c.knots), jnp.asarray(c.coef)
+    s = jnp.mod(jnp.asarray(s, knots.dtype), knots[-1])
+    i = jnp.clip(jnp.searchsorted(knots, s, side="right") - 1, 0, coef.shape[0] - 1)
+    t = (s - knots[i])[..., None]
+    a = coef[i]                                          # (..., 4, 2)
+    p = ((a[..., 0, :] * t + a[..., 1, :]) * t + a[..., 2, :]) * t + a[..., 3, :]
+    dp = (3 * a[..., 0, :] * t + 2 * a[..., 1, :]) * t + a[..., 2, :]
+    tan = dp / jnp.linalg.norm(dp, axis=-1, keepdims=True)
+    return p, jnp.stack([tan[..., 1], -tan[..., 0]], axis=-1)
+
+
+def arc_length(c: Curve, k) -> np.ndarray:
+    """Arc-length coordinate of node(s) ``k`` (positions within the loop) on the curve."""
+    return np.asarray(c.knots)[np.asarray(k)]

@@ -29,7 +29,8 @@ def config_of(scene: Scene) -> Config:
     return Config(friction_model=scene.friction_model, contact=scene.contact,
                   rotation=scene.fingers.rotation is not None, capacity=int(s.capacity),
                   max_steps=int(s.max_steps), max_events=int(s.max_events),
-                  newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters))
+                  newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
+                  placement=scene.placement is not None, adversary=scene.adversary is not None)
 
 
 def grasp_of(scene: Scene, op: Compliance) -> Grasp:
@@ -46,12 +47,24 @@ def grasp_of(scene: Scene, op: Compliance) -> Grasp:
     gap_tol = s.gap_tol if s.gap_tol is not None else (1e-9 if f64 else 1e-5) * L
     nodes = scene.boundary_nodes()
     table = boundary.position_table(nodes, int(np.max(nodes)) + 1)
-    grip = boundary.lookup(table, scene.grip)
+    grip = boundary.lookup(table, scene.grip) if scene.grip is not None else jnp.zeros(2, jnp.int32)
+    placement = adversary = curve = ()
+    if scene.placement is not None or scene.adversary is not None:
+        curve = scene.curve()
+    if scene.placement is not None:
+        placement = (jnp.asarray(scene.placement.s, dt), jnp.asarray(scene.placement.angle, dt))
+    if scene.adversary is not None:
+        a = scene.adversary
+        radius = jnp.asarray(a.radius if a.radius is not None else scene.fingers.radius, dt)
+        push = jnp.asarray(a.push, dt)
+        adversary = (jnp.asarray(a.s, dt), jnp.asarray(a.angle, dt), radius, push,
+                     jnp.asarray(a.step, dt) if a.step is not None else push / 50)
     rot = scene.fingers.rotation
     rot = jnp.zeros((2, 1), dt) if rot is None else jnp.asarray(rot, dt)
     g = Grasp(grip=grip, radius=jnp.asarray(scene.fingers.radius, dt), mu=jnp.asarray(scene.friction, dt),
               depth=depth, step=step, event_tol=event_tol, newton_tol=jnp.asarray(newton_tol, dt),
-              gap_tol=jnp.asarray(gap_tol, dt), rotation=rot, invalid=jnp.array(-1, jnp.int32))
+              gap_tol=jnp.asarray(gap_tol, dt), rotation=rot, invalid=jnp.array(-1, jnp.int32),
+              placement=placement, adversary=adversary, curve=curve)
     return dataclasses.replace(g, invalid=invalid_index(g, scene, op))
 
 
@@ -62,14 +75,21 @@ def invalid_index(grasp: Grasp, scene: Scene, op: Compliance) -> jax.Array:
 
 def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
     """The numbers :mod:`~jaxsqueeze.simulation.validate` checks, by field name."""
-    P = op.points * op.length
-    gp = P[jnp.clip(grasp.grip, 0, op.m - 1)]
-    return {"material.E": scene.material.E, "material.nu": scene.material.nu,
-            "material.thickness": scene.material.thickness, "fingers.radius": grasp.radius,
-            "friction": grasp.mu, "depth": grasp.depth, "settings.step": grasp.step,
-            "settings.event_tol": grasp.event_tol, "settings.newton_tol": grasp.newton_tol,
-            "settings.gap_tol": grasp.gap_tol, "grip_slots": grasp.grip,
-            "grip_distance": jnp.linalg.norm(gp[1] - gp[0]), "fingers.rotation": grasp.rotation}
+    values = {"material.E": scene.material.E, "material.nu": scene.material.nu,
+              "material.thickness": scene.material.thickness, "fingers.radius": grasp.radius,
+              "friction": grasp.mu, "depth": grasp.depth, "settings.step": grasp.step,
+              "settings.event_tol": grasp.event_tol, "settings.newton_tol": grasp.newton_tol,
+              "settings.gap_tol": grasp.gap_tol, "fingers.rotation": grasp.rotation}
+    if scene.placement is None:
+        gp = op.points[jnp.clip(grasp.grip, 0, op.m - 1)] * op.length
+        values.update({"grip_slots": grasp.grip, "grip_distance": jnp.linalg.norm(gp[1] - gp[0])})
+    else:
+        values.update({"placement.s": grasp.placement[0], "placement.angle": grasp.placement[1]})
+    if scene.adversary is not None:
+        s3, angle, radius, push, step = grasp.adversary
+        values.update({"adversary.s": s3, "adversary.angle": angle, "adversary.radius": radius,
+                       "adversary.push": push, "adversary.step": step})
+    return values
 
 
 @partial(jax.jit, static_argnames=("cfg",))
@@ -101,7 +121,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     """
     op = scene.operator() if op is None else op
     concrete = is_concrete(scene)
-    if concrete:
+    if concrete and scene.placement is None:
         check_grip(scene, op)
     cfg = config_of(scene)
     grasp = grasp_of(scene, op)

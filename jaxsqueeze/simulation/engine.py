@@ -45,6 +45,12 @@ class Config:
     max_events: int = 256
     newton_iters: int = 30
     bisect_iters: int = 40
+    placement: bool = False           # fingers placed by arc length (an approach finds first touch)
+    adversary: bool = False           # a third finger pushes after the squeeze (a second phase)
+
+    @property
+    def fingers(self) -> int:
+        return 3 if self.adversary else 2
 
     @property
     def newton(self) -> bool:
@@ -60,7 +66,8 @@ class Config:
 class Grasp:
     """Traced grasp parameters in SI units (they become scaled inside :func:`simulate`).
 
-    grip: (2,) int positions of the two grip nodes among the operator's nodes.
+    grip: (2,) int positions of the two grip nodes among the operator's nodes (ignored when
+        ``placement`` is given: the approach finds the first-touch nodes).
     radius: fingertip radius [m]; mu: friction coefficient; depth: target depth [m];
     step: squeeze step [m]; event_tol: event bracket width [m]; newton_tol: [rad];
     gap_tol: penetration tolerance [m]; rotation: (2, k) polynomial coefficients of α_i(d).
@@ -77,6 +84,9 @@ class Grasp:
     gap_tol: jax.Array
     rotation: jax.Array
     invalid: jax.Array
+    placement: tuple = ()     # (s (2,) [m], angle () [rad]) when placed by arc length
+    adversary: tuple = ()     # (s () [m], angle () [rad], radius () [m], push () [m], step () [m])
+    curve: tuple = ()         # boundary.Curve of the outer loop [m], when placed or pushed
 
 
 def unit(a):
@@ -88,52 +98,140 @@ def cross2(a, b):
 
 
 class Model(NamedTuple):
-    """Everything fixed during one squeeze, in scaled units (lengths / L)."""
+    """Everything fixed during one loading phase, in scaled units (lengths / L).
+
+    The fingertip centres move linearly with the phase's load parameter λ (the squeeze depth
+    d in the squeeze phase, the push displacement in the adversary phase):
+    ``centres(λ) = base + λ · dirn``. Finger 0 is still, finger 1 squeezes, finger 2 (when
+    ``cfg.adversary``) pushes.
+    """
 
     op: Compliance
     cfg: Config
-    o1: jax.Array        # (2,) centre of finger 1
-    o2: jax.Array        # (2,) initial centre of finger 2
-    e: jax.Array         # (2,) unit direction finger 2 moves in
-    r: jax.Array         # radius
+    base: jax.Array      # (F, 2) centres at λ = 0
+    dirn: jax.Array      # (F, 2) centre velocity per unit λ
+    present: jax.Array   # (F,) bool: the finger takes part in contact in this phase
+    r: jax.Array         # (F,) radii
     phi: jax.Array       # friction angle atan(mu)
     mu: jax.Array
     L: jax.Array
     rotation: jax.Array  # (2, k), SI
-    grip: jax.Array      # (2,) boundary positions of the grip nodes (clipped to a valid index)
-    D: jax.Array         # target depth
-    h: jax.Array         # squeeze step
+    rot_depth: jax.Array  # (2,): the depth at λ is rot_depth[0] + rot_depth[1] λ (rotation schedule)
+    grip: jax.Array      # (2,) boundary positions of the first contacts (clipped to a valid index)
+    D: jax.Array         # target of λ
+    h: jax.Array         # step of λ
     ev_tol: jax.Array    # event bracket width
     newton_tol: jax.Array  # [rad]
     gap_tol: jax.Array
     eta: jax.Array       # probe offset past an event (stick-first hypothesis test)
     invalid: jax.Array   # () int32: index of the first invalid input (-1: all valid)
+    margin: jax.Array    # () smooth feasibility margin of the grip [rad] (> 0 feasible)
+    phase: jax.Array     # () int32: 0 squeeze, 1 adversary push
 
     def centres(self, d):
-        return jnp.stack([self.o1, self.o2 + d * self.e])
+        return self.base + d * self.dirn
 
     def angles(self, d):
+        F = self.cfg.fingers
         if not self.cfg.rotation:
-            return jnp.zeros(2, self.r.dtype)
-        return jax.vmap(jnp.polyval, (0, None))(self.rotation, d * self.L)
+            return jnp.zeros(F, self.r.dtype)
+        a = jax.vmap(jnp.polyval, (0, None))(self.rotation, (self.rot_depth[0] + self.rot_depth[1] * d) * self.L)
+        return jnp.concatenate([a, jnp.zeros(F - 2, a.dtype)])
+
+
+def first_touch(x, o, v, r, present=True):
+    """Where a circle of radius r moving along the unit direction v (from far behind) first
+    touches one of the points x (m, 2): (t, k) with the centre at o + t v at touch and k the
+    touched point; t = +inf when the circle's path misses every point. This is event A's gap
+    function solved along the approach (the object is rigid before first touch)."""
+    w = x - o
+    b = w @ v
+    disc = b * b - jnp.sum(w * w, axis=1) + r * r
+    t = jnp.where(disc > 0, b - jnp.sqrt(jnp.where(disc > 0, disc, 1.0)), jnp.inf)
+    t = jnp.where(present, t, jnp.inf)
+    k = jnp.argmin(t)
+    return t[k], k
+
+
+def gap_to_fingers(model: Model, x, d):
+    """(m, F) gap of points x (m, 2) to each fingertip circle at λ = d (+inf for absent fingers)."""
+    g = jnp.linalg.norm(x[:, None, :] - model.centres(d)[None], axis=-1) - model.r
+    return jnp.where(model.present, g, jnp.inf)
 
 
 def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
+    """The squeeze phase's model: finger centres from the grip nodes (each one radius out along
+    the node's normal, squeezing along the line between the nodes), or from a continuous
+    placement (each touching the smooth boundary at p(s_i), squeezing along
+    p(s_0) − p(s_1) turned by the angle offset, then closed in along that line until each
+    first touches a node)."""
     L = op.length
     dt = op.G.dtype
-    grip = jnp.clip(grasp.grip, 0, op.m - 1)      # an invalid grip is reported, never silently used
-    p = op.points[grip]
-    n = op.normals[grip]
-    r = grasp.radius / L
-    o = p + r * n
-    e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
+    F = cfg.fingers
+    r = jnp.full(F, grasp.radius / L, dt)
     mu = jnp.asarray(grasp.mu, dt)
     phi = jnp.arctan(mu) if cfg.friction_model == "coulomb" else jnp.zeros_like(mu)
+    touches = jnp.array(True)
+    if cfg.placement:
+        s, angle = grasp.placement
+        q, n = boundary.point(_scaled_curve(grasp.curve, L), jnp.asarray(s, dt) / L)
+        e0 = (q[0] - q[1]) / jnp.linalg.norm(q[0] - q[1])
+        ca, sa = jnp.cos(angle), jnp.sin(angle)
+        e = jnp.array([ca * e0[0] - sa * e0[1], sa * e0[0] + ca * e0[1]])
+        o = q + r[:2, None] * n
+        t0, k0 = first_touch(op.points, o[0], -e, r[0])
+        t1, k1 = first_touch(op.points, o[1], e, r[1])
+        touches = jnp.isfinite(t0) & jnp.isfinite(t1) & (k0 != k1)
+        t0, t1 = jnp.where(touches, t0, 0.0), jnp.where(touches, t1, 0.0)
+        o = jnp.stack([o[0] - t0 * e, o[1] + t1 * e])
+        grip = jnp.stack([k0, k1])
+    else:
+        grip = jnp.clip(grasp.grip, 0, op.m - 1)      # an invalid grip is reported, never silently used
+        p = op.points[grip]
+        o = p + r[:2, None] * op.normals[grip]
+        e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
+    # smooth feasibility margin: the friction angle minus the larger angle between the segment
+    # joining the first contacts and their inward normals (Section I-A), −π when a finger misses
+    ang = laws.grip_cone_angles(op.points[grip], -op.normals[grip])
+    half = phi if cfg.friction_model != "stick" else jnp.asarray(0.5 * jnp.pi, dt)
+    margin = jnp.where(touches, half + laws.CONE_SLACK - jnp.max(ang), -jnp.pi)
+    base = jnp.zeros((F, 2), dt).at[:2].set(o)
+    dirn = jnp.zeros((F, 2), dt).at[1].set(e)
+    present = jnp.arange(F) < 2
     h = grasp.step / L
     eta = jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps)   # probe offset, above round-off in float32
-    return Model(op, cfg, o[0], o[1], e, r, phi, mu, L, jnp.asarray(grasp.rotation, dt), grip,
-                 grasp.depth / L, h, grasp.event_tol / L, grasp.newton_tol, grasp.gap_tol / L, eta,
-                 jnp.asarray(grasp.invalid, jnp.int32))
+    return Model(op, cfg, base, dirn, present, r, phi, mu, L, jnp.asarray(grasp.rotation, dt),
+                 jnp.array([0.0, 1.0], dt), grip, grasp.depth / L, h, grasp.event_tol / L, grasp.newton_tol,
+                 grasp.gap_tol / L, eta, jnp.asarray(grasp.invalid, jnp.int32), margin, jnp.array(0, jnp.int32))
+
+
+def _scaled_curve(c, L):
+    """A curve in metres as one in scaled lengths (knots / L; coefficients of t^k scale as L^(1-k))."""
+    return boundary.Curve(jnp.asarray(c.knots) / L, jnp.asarray(c.coef) * (L ** (2.0 - jnp.arange(4)))[None, :, None])
+
+
+def push_model(model: Model, grasp: Grasp, st) -> Model:
+    """The adversary phase's model, from the squeeze model and its final state: the grasping
+    fingers hold still at the final depth, and a third fingertip, placed on the smooth boundary
+    at arc length s and closed in along its push direction (the inward normal turned by the
+    angle offset) until it touches the deformed object, pushes by λ along that direction."""
+    op, L = model.op, model.L
+    dt = op.G.dtype
+    s3, angle, radius, push, step = grasp.adversary
+    q, n = boundary.point(_scaled_curve(grasp.curve, L), jnp.asarray(s3, dt) / L)
+    ca, sa = jnp.cos(angle), jnp.sin(angle)
+    v = -jnp.array([ca * n[0] - sa * n[1], sa * n[0] + ca * n[1]])
+    r3 = radius / L
+    o = q + r3 * n
+    t, _ = first_touch(op.points + st.u, o, v, r3)
+    t = jnp.where(jnp.isfinite(t), t, 0.0)
+    base = model.centres(st.d).at[2].set(o + t * v)
+    dirn = jnp.zeros_like(model.dirn).at[2].set(v)
+    h = step / L
+    return model._replace(base=base, dirn=dirn, present=jnp.ones_like(model.present), r=model.r.at[2].set(r3),
+                          rot_depth=jnp.stack([st.d, jnp.zeros((), dt)]), D=push / L, h=h,
+                          ev_tol=h * 1e-4, eta=jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps),
+                          phase=jnp.array(1, jnp.int32))
 
 
 # ----------------------------------------------------------------------------- one configuration
@@ -165,7 +263,7 @@ def pack(model: Model, mode, finger, theta, armed=None) -> Contacts:
 def slot_forces(model: Model, c: Contacts, th, d):
     """Forces (S, 2) and rigid amplitudes g (3,) with slot nodes at polar angles ``th``."""
     S = c.idx.shape[0]
-    pos = model.centres(d)[c.finger] + model.r * unit(th + model.angles(d)[c.finger])
+    pos = model.centres(d)[c.finger] + model.r[c.finger, None] * unit(th + model.angles(d)[c.finger])
     disp = (pos - model.op.points[c.idx]).reshape(-1)
     rhs = jnp.concatenate([jnp.where(jnp.repeat(c.active, 2), disp, 0.0), jnp.zeros(3, disp.dtype)])
     x = c.Minv @ rhs
@@ -267,7 +365,7 @@ def solve_at(model: Model, c: Contacts, mode, d) -> Solution:
 
     # event A: gap of each free node to the nearest fingertip
     x = op.points + u
-    gaps = jnp.linalg.norm(x[:, None, :] - model.centres(d)[None], axis=-1) - model.r
+    gaps = gap_to_fingers(model, x, d)
     eA = jnp.min(gaps, axis=1) + model.gap_tol
     if model.cfg.contact == "point":
         eA = jnp.full_like(eA, jnp.inf)
@@ -330,14 +428,18 @@ class State:
     fault: jax.Array        # RUNNING or a structural Status raised by a stage (overflow, stall, ...)
     n_ev: jax.Array
     events: tuple           # depth (E,), node (E,), kind (E,), finger (E,)
-    hist: tuple             # depth (H,), mode, finger, theta (H, m), F, u (H, m, 2), centres (H, 2, 2), alpha (H, 2), g (H, 3)
+    hist: tuple             # depth (H,), mode, finger, theta (H, m), F, u (H, m, 2), centres (H, F, 2), alpha (H, F), g (H, 3), push (H,)
     count: jax.Array
     stats: Stats
+    squeeze_status: jax.Array   # the status the squeeze phase ended with
+    margin: jax.Array           # the grip's smooth feasibility margin [rad] (Model.margin)
+    grip: jax.Array             # (2,) boundary positions of the first contacts
 
 
 def _record(model: Model, st: State, row) -> tuple:
-    vals = (st.d, st.mode.astype(jnp.int8), st.finger.astype(jnp.int8), st.theta, st.F, st.u,
-            model.centres(st.d), model.angles(st.d), st.g)
+    depth, push = jnp.where(model.phase == 0, st.d, model.rot_depth[0]), jnp.where(model.phase == 0, 0.0, st.d)
+    vals = (depth, st.mode.astype(jnp.int8), st.finger.astype(jnp.int8), st.theta, st.F, st.u,
+            model.centres(st.d), model.angles(st.d), st.g, push)
     return tuple(h.at[row].set(v) for h, v in zip(st.hist, vals))
 
 
@@ -375,7 +477,7 @@ def _new_contacts(model: Model, st: State, sol: Solution, kind, d, flag):
     # A: attach at the polar angle where the node meets the fingertip
     x = model.op.points + sol.u
     C = model.centres(d)
-    near = jnp.argmin(jnp.linalg.norm(x[:, None, :] - C[None], axis=-1), axis=1)
+    near = jnp.argmin(gap_to_fingers(model, x, d), axis=1)
     ang = jnp.arctan2(*(x - C[near]).T[::-1]) - model.angles(d)[near]
     added = flag & (kind == 0)
     first = STICK if model.cfg.friction_model != "frictionless" else SLIP_POS
@@ -432,9 +534,9 @@ def _settle_frictionless(model: Model, mode, finger, theta, d):
         sol = solve_at(model, c, mode, dp)
         x = model.op.points + sol.u
         C = model.centres(dp)
-        dist = jnp.linalg.norm(x[:, None, :] - C[None], axis=-1)
-        near = jnp.argmin(dist, axis=1)
-        inside = (mode == FREE) & (jnp.min(dist, axis=1) - model.r < -model.gap_tol)
+        gaps = gap_to_fingers(model, x, dp)
+        near = jnp.argmin(gaps, axis=1)
+        inside = (mode == FREE) & (jnp.min(gaps, axis=1) < -model.gap_tol)
         ang = jnp.arctan2(*(x - C[near]).T[::-1]) - model.angles(dp)[near]
         slotted = jnp.zeros(m, bool).at[jnp.where(c.active, c.idx, m)].set(True, mode="drop")
         fn = jnp.where(slotted & (mode > FREE), sol.fn, jnp.inf)
@@ -469,9 +571,9 @@ def init(model: Model) -> State:
     if cfg.slip_events:
         mode, finger, theta, _ = _test_hypothesis(model, mode, finger, theta, added, jnp.zeros((), dt))
 
-    # the segment between the initial contacts must lie inside both friction cones (Section I-A)
-    feasible = laws.grip_feasible(P[model.grip], -op.normals[model.grip], model.phi)
-    feasible = feasible | (cfg.friction_model == "stick")
+    # the segment between the initial contacts must lie inside both friction cones (Section I-A),
+    # and with a continuous placement both fingers must have touched the object
+    feasible = model.margin >= 0
 
     E, H = cfg.max_events, cfg.max_steps + 1
     z = jnp.zeros
@@ -481,8 +583,8 @@ def init(model: Model) -> State:
                i32(0), i32(RUNNING), i32(RUNNING), i32(0),
                (z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
                (z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
-                z((H, m, 2), dt), z((H, 2, 2), dt), z((H, 2), dt), z((H, 3), dt)),
-               i32(0), Stats(i32(0), i32(0), i32(0), i32(0), i32(0), zero))
+                z((H, m, 2), dt), z((H, cfg.fingers, 2), dt), z((H, cfg.fingers), dt), z((H, 3), dt), z(H, dt)),
+               i32(0), Stats(i32(0), i32(0), i32(0), i32(0), i32(0), zero), i32(RUNNING), model.margin, model.grip)
     c = pack(model, st.mode, st.finger, st.theta)
     sol = solve_at(model, c, st.mode, st.d)
     st = _settle(model, st, c, sol, st.d)
@@ -605,17 +707,36 @@ def finish(model: Model, st: State, ok) -> State:
     return _with(st, it=it, hist=hist, count=st.count + 1, status=status.astype(jnp.int32))
 
 
+def run(model: Model, st: State) -> State:
+    """``step`` in a ``lax.while_loop`` until ``finish`` sets a status."""
+    return lax.while_loop(lambda s: s.status == RUNNING, lambda s: step(model, s), st)
+
+
+def start_push(model: Model, st: State) -> State:
+    """Hand a finished squeeze to the adversary phase: λ restarts at 0 from the squeezed state
+    (contacts, anchors and forces carry over); only a squeeze that succeeded is pushed."""
+    status = jnp.where(st.status == Status.SUCCESS, RUNNING, st.status).astype(jnp.int32)
+    return _with(st, d=jnp.zeros_like(st.d), status=status, squeeze_status=st.status)
+
+
 def simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
     """The jittable core of :func:`jaxsqueeze.squeeze`: ``init``, then ``step`` in a
-    ``lax.while_loop`` until ``finish`` sets a status.
+    ``lax.while_loop`` until ``finish`` sets a status; with an adversary, a second loop of the
+    same stages pushes the squeezed object (:func:`push_model`).
 
     Returns the final :class:`State` (scaled units; history and event log padded).
     """
     model = make_model(op, grasp, cfg)
     with jax.named_scope("init"):
         st = init(model)
-    with jax.named_scope("loop"):
-        return lax.while_loop(lambda s: s.status == RUNNING, lambda s: step(model, s), st)
+    with jax.named_scope("squeeze"):
+        st = run(model, st)
+    st = _with(st, squeeze_status=st.status)
+    if cfg.adversary:
+        with jax.named_scope("push"):
+            pm = push_model(model, grasp, st)
+            st = run(pm, start_push(pm, st))
+    return st
 
 
 def _with(st: State, **kw) -> State:

@@ -62,7 +62,10 @@ class SqueezeResult:
     theta: (k, m) polar angle of contact nodes about their fingertip centre, finger frame [rad].
     forces: (k, m, 2) contact force each fingertip exerts on the object [N].
     boundary_displacement: (k, m, 2) displacement of the boundary nodes [m].
-    centres: (k, 2, 2) fingertip centres [m]; alpha: (k, 2) fingertip rotations [rad].
+    centres: (k, F, 2) fingertip centres [m]; alpha: (k, F) fingertip rotations [rad]; F = 2,
+        or 3 with an adversary (finger 2 pushes).
+    push: (k,) adversary push displacement [m] (0 during the squeeze; the squeeze phase's rows
+        are those with push 0 before the first positive one).
     rigid: (k, 3) rigid part g of every row (t_x [m], t_y [m], rotation [rad]).
     events: :class:`EventLog`.
     displacement: (n, 2) displacement of every node at the final depth [m] (None for an
@@ -75,6 +78,11 @@ class SqueezeResult:
     stats: :class:`~jaxsqueeze.simulation.engine.Stats` (steps, events, Newton and bracket
         iterations, largest Newton residual).
     invalid: () int, index into ``validate.FIELDS`` of the first invalid input, -1 if none.
+    margin: () smooth feasibility margin of the grip [rad]: the friction angle minus the larger
+        angle between the segment joining the first contacts and their inward normals; < 0
+        infeasible (−π when a placed finger cannot touch the object).
+    squeeze_status: () the status the squeeze phase ended with (``status`` is the final one,
+        after the adversary push when there is one).
     """
 
     status: jax.Array
@@ -97,6 +105,9 @@ class SqueezeResult:
     radius: jax.Array
     stats: Stats
     invalid: jax.Array
+    push: jax.Array
+    margin: jax.Array
+    squeeze_status: jax.Array
 
     @property
     def outcome(self) -> Status:
@@ -136,6 +147,16 @@ class SqueezeResult:
         return xp.stack([xp.sum(xp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in (0, 1)], -2)
 
     @property
+    def finger_forces(self):
+        """(k, F, 2) total force of every finger on the object [N] (F = 3 with an adversary)."""
+        xp = self._xp
+        F = xp.asarray(self.forces)
+        fg = xp.asarray(self.finger)
+        on = xp.asarray(self.modes) > 0
+        n = xp.shape(self.centres)[-2]
+        return xp.stack([xp.sum(xp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in range(n)], -2)
+
+    @property
     def grip_force(self):
         """() magnitude of the total force of the still finger at the final row [N]."""
         return self._xp.linalg.norm(self._last(self.total_force)[..., 0, :], axis=-1)
@@ -156,7 +177,7 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     """Convert the engine's final state (scaled) into a :class:`SqueezeResult` (SI), padded
     with the last valid row; the full displacement field is left to the caller (None)."""
     L, Fs = op.length, op.force_scale
-    depth, mode, finger, theta, F, u, C, alpha, g = st.hist
+    depth, mode, finger, theta, F, u, C, alpha, g, push = st.hist
     k = st.count
     rows = jnp.arange(depth.shape[0])
     last = jnp.minimum(rows, k - 1)                  # pad with the last valid row
@@ -168,11 +189,13 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
         forces=pad(F) * Fs, boundary_displacement=pad(u) * L, centres=pad(C) * L, alpha=pad(alpha),
         rigid=pad(g) * gs, events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
         g=st.g * gs, count=k, n_events=st.n_ev, nodes=op.nodes,
-        grip=jnp.where(grasp.grip >= 0, op.nodes[jnp.clip(grasp.grip, 0, op.m - 1)], -1), radius=grasp.radius,
-        stats=st.stats, invalid=grasp.invalid)
+        grip=op.nodes[st.grip], radius=grasp.radius,
+        stats=st.stats, invalid=grasp.invalid, push=pad(push) * L, margin=st.margin,
+        squeeze_status=st.squeeze_status)
 
 
-HISTORY = ("depth", "modes", "finger", "theta", "forces", "boundary_displacement", "centres", "alpha", "rigid")
+HISTORY = ("depth", "modes", "finger", "theta", "forces", "boundary_displacement", "centres", "alpha", "rigid",
+           "push")
 
 
 def trim(res: SqueezeResult) -> SqueezeResult:

@@ -12,6 +12,7 @@ import numpy as np
 from ..mechanics.material import Material
 from ..tracing import is_concrete, numeric
 from .laws import CONTACT_MODELS, FRICTION_MODELS
+from ..geometry import boundary
 from ..geometry.mesh import Mesh
 from ..mechanics.operator import Compliance
 
@@ -47,6 +48,72 @@ class Fingers:
             if rot.ndim != 2 or rot.shape[0] != 2 or not np.all(np.isfinite(rot)):
                 raise ValueError("Fingers.rotation must be finite polynomial coefficients of shape (2, k): "
                                  f"one row per finger, highest power first; got shape {rot.shape}.")
+
+
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class Placement:
+    """Where the two fingertips touch, as continuous coordinates (grasp planning, DESIGN 2.9).
+
+    s: (2,) arc length [m] of finger 0 (still) and finger 1 (squeezing) along the outer
+        boundary loop, measured from its first node (``mesh.boundary[0]``) with the material
+        on the left (counterclockwise); periodic in the perimeter, so any real number works.
+    angle: () offset [rad] of the squeeze direction, counterclockwise, from the paper's
+        (along the line from p(s_1) to p(s_0): finger 1 moves toward finger 0).
+
+    Each fingertip centre starts at p(s_i) + r n(s_i) on a C² spline through the boundary
+    nodes (:func:`jaxsqueeze.geometry.boundary.curve`), then both close in along the squeeze
+    line until each first touches a node: that node is its first contact (event A's gap
+    function along the approach). Outcomes are piecewise smooth in (s, angle); a placement
+    whose fingers cannot both touch, or whose first contacts leave a friction cone, gives
+    ``Status.INFEASIBLE_GRIP`` and a negative ``result.margin``. A pytree of two leaves.
+    """
+
+    s: Any
+    angle: Any = 0.0
+
+    def __post_init__(self):
+        if numeric(self.s) and np.shape(self.s)[-1:] != (2,):
+            raise ValueError(f"Placement.s={self.s!r} must hold two arc lengths [m] (finger 0, finger 1).")
+        for name in ("s", "angle"):
+            v = getattr(self, name)
+            if numeric(v) and not np.all(np.isfinite(np.asarray(v, float))):
+                raise ValueError(f"Placement.{name}={v!r} must be finite.")
+
+
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class Adversary:
+    """A third round fingertip that pushes the grasped object after the squeeze (the adversary
+    of Jia, Guo and Lin, IJRR 2014), as a second loading phase of the same event loop.
+
+    s: () arc length [m] of the pushed boundary point (as in :class:`Placement`).
+    push: () push displacement [m] > 0.
+    angle: () push direction offset [rad] from the inward normal at s.
+    radius: () fingertip radius [m]; None: the grasping fingers' radius.
+    step: () push step [m]; None: push / 50.
+
+    The grasping fingers hold still at the squeeze depth; the pusher starts on the boundary
+    point, closes in until it touches the deformed object, then moves by the push. Only a
+    squeeze that succeeded is pushed. Needs a continuous :class:`Placement`'s curve, so a
+    scene with an adversary is placed by arc length (a grip is converted to one).
+    """
+
+    s: Any
+    push: Any
+    angle: Any = 0.0
+    radius: Any = None
+    step: Any = None
+
+    def __post_init__(self):
+        for name in ("s", "angle"):
+            v = getattr(self, name)
+            if numeric(v) and not np.all(np.isfinite(np.asarray(v, float))):
+                raise ValueError(f"Adversary.{name}={v!r} must be finite.")
+        for name in ("push", "radius", "step"):
+            v = getattr(self, name)
+            if numeric(v) and not (np.all(np.isfinite(np.asarray(v, float))) and np.all(np.asarray(v, float) > 0)):
+                raise ValueError(f"Adversary.{name}={v!r} must be a finite length > 0 m.")
 
 
 @jax.tree_util.register_dataclass
@@ -92,7 +159,8 @@ class Scene:
             :class:`~jaxsqueeze.band.Band` (ring-like object).
         material: :class:`~jaxsqueeze.material.Material`.
         fingers: :class:`Fingers`.
-        grip: (i, j) mesh node indices on the boundary touched by finger 1 and finger 2.
+        grip: (i, j) mesh node indices on the boundary touched by finger 0 (still) and finger 1
+            (squeezing); or None when ``placement`` is given.
         friction: Coulomb coefficient μ ≥ 0.
         depth: target squeeze depth d [m] > 0.
         friction_model: "coulomb" (stick/slip, events A–D), "frictionless" (every contact
@@ -101,6 +169,8 @@ class Scene:
             finger, no event A; for ring-like objects, Section V-A).
         method: compliance build ("sparse", "dense", "spectral"); ignored for bands.
         settings: :class:`Settings`.
+        placement: a continuous :class:`Placement` (takes the place of ``grip``).
+        adversary: an :class:`Adversary` pushing after the squeeze (grasp quality).
 
     A pytree (MJX's rule: a field is a leaf if and only if it is a number): material,
     fingers, grip, friction, depth and the settings' tolerances are leaves, so ``jax.jit``,
@@ -111,13 +181,15 @@ class Scene:
     mesh: Any = field(metadata=dict(static=True))
     material: Material
     fingers: Fingers
-    grip: Any
+    grip: Any = None
     friction: Any = 0.5
     depth: Any = 0.01
     friction_model: str = field(default="coulomb", metadata=dict(static=True))
     contact: str = field(default="segment", metadata=dict(static=True))
     method: str = field(default="sparse", metadata=dict(static=True))
     settings: Settings = field(default_factory=Settings)
+    placement: Placement | None = None
+    adversary: Adversary | None = None
 
     def replace(self, **changes) -> "Scene":
         """A copy with some fields changed (the cached compliance operator is shared)."""
@@ -136,7 +208,9 @@ class Scene:
             d = np.asarray(self.depth, float)
             if not np.all(np.isfinite(d)) or np.any(d <= 0):
                 raise ValueError(f"depth={self.depth!r} must be a finite squeeze depth > 0 m.")
-        if numeric(self.grip):
+        if self.grip is None and self.placement is None:
+            raise ValueError("a Scene needs grip=(i, j) (two boundary nodes) or placement=Placement(s=(s0, s1)).")
+        if numeric(self.grip) and self.placement is None:
             g = np.asarray(self.grip)
             if g.shape[-1:] != (2,) or not np.issubdtype(g.dtype, np.integer):
                 raise ValueError(f"grip={self.grip!r} must be two integer boundary node indices (i, j).")
@@ -166,6 +240,20 @@ class Scene:
         if isinstance(self.mesh, Mesh):
             return np.asarray(self.mesh.boundary)
         return np.arange(self.mesh.m)
+
+    def curve(self):
+        """The smooth arc-length parametrization of the outer boundary loop [m], centroid frame
+        (:func:`jaxsqueeze.geometry.boundary.curve`); :class:`Placement` coordinates refer to it."""
+        return boundary_curve(self.mesh)
+
+    def arc_length(self, node) -> np.ndarray:
+        """Arc-length coordinate(s) s [m] of outer-loop boundary node(s) ``node`` (mesh indices):
+        ``Placement(s=scene.arc_length(grip))`` places the fingers at those nodes."""
+        pos = boundary.positions(self.boundary_nodes(), node)
+        outer = self.mesh.loops[0] if hasattr(self.mesh, "loops") else self.mesh.m
+        if np.any(pos >= outer):
+            raise ValueError(f"node(s) {np.asarray(node).tolist()} are not on the outer boundary loop.")
+        return boundary.arc_length(self.curve(), pos)
 
     def nearest_boundary_node(self, xy) -> int:
         """Boundary node nearest to the point ``xy`` (2,) given in the user's frame [m]."""
@@ -232,6 +320,13 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
             per[key] = op
     h = material.thickness if solid else obj.height
     return dataclasses.replace(op, stiffness=jax.numpy.asarray(material.E * h, op.G.dtype))
+
+
+def boundary_curve(obj) -> "boundary.Curve":
+    """The outer loop's :class:`~jaxsqueeze.geometry.boundary.Curve` of a mesh or band [m]."""
+    if isinstance(obj, Mesh):
+        return boundary.curve(obj.points[obj.boundary], obj.loops)
+    return boundary.curve(np.asarray(obj.points), (obj.m,))
 
 
 def nearest_boundary_node(obj, xy) -> int:
