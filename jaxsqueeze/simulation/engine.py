@@ -214,15 +214,30 @@ def push_model(model: Model, grasp: Grasp, st) -> Model:
     """The adversary phase's model, from the squeeze model and its final state: the grasping
     fingers hold still at the final depth, and a third fingertip, placed on the smooth boundary
     at arc length s and closed in along its push direction (the inward normal turned by the
-    angle offset) until it touches the deformed object, pushes by λ along that direction."""
+    angle offset) until it touches the deformed object, pushes by λ along that direction.
+    The pushed point is the material point at arc length s on the squeezed object (its node
+    displacements interpolated), and its normal turns as the boundary span there turned."""
     op, L = model.op, model.L
     dt = op.G.dtype
     s3, angle, radius, push, step = grasp.adversary
-    q, n = boundary.point(_scaled_curve(grasp.curve, L), jnp.asarray(s3, dt) / L)
-    ca, sa = jnp.cos(angle), jnp.sin(angle)
+    crv = _scaled_curve(grasp.curve, L)
+    s3 = jnp.asarray(s3, dt) / L
+    q, n = boundary.point(crv, s3)
+    # the material point at arc length s3 on the squeezed object: interpolate the outer loop's
+    # node displacements along the span that holds s3; turn the normal as that span turned
+    k = crv.knots
+    sm = jnp.mod(s3, k[-1])
+    i = jnp.clip(jnp.searchsorted(k, sm, side="right") - 1, 0, k.shape[0] - 2)
+    j = jnp.mod(i + 1, k.shape[0] - 1)
+    w = (sm - k[i]) / (k[i + 1] - k[i])
+    q = q + (1 - w) * st.u[i] + w * st.u[j]
+    chord0 = op.points[j] - op.points[i]
+    chord = chord0 + st.u[j] - st.u[i]
+    turn = angle + jnp.arctan2(cross2(chord0, chord), jnp.sum(chord0 * chord))
+    ca, sa = jnp.cos(turn), jnp.sin(turn)
     v = -jnp.array([ca * n[0] - sa * n[1], sa * n[0] + ca * n[1]])
     r3 = radius / L
-    o = q + r3 * n
+    o = q - r3 * v
     t, _ = first_touch(op.points + st.u, o, v, r3)
     t = jnp.where(jnp.isfinite(t), t, 0.0)
     base = model.centres(st.d).at[2].set(o + t * v)
