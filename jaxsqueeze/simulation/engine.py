@@ -731,7 +731,9 @@ def start_push(model: Model, st: State) -> State:
     """Hand a finished squeeze to the adversary phase: λ restarts at 0 from the squeezed state
     (contacts, anchors and forces carry over); only a squeeze that succeeded is pushed."""
     status = jnp.where(st.status == Status.SUCCESS, RUNNING, st.status).astype(jnp.int32)
-    return _with(st, d=jnp.zeros_like(st.d), status=status, squeeze_status=st.status)
+    hist = list(st.hist)
+    hist[6] = hist[6].at[:, 2].set(model.base[2])       # the pusher waits at its start in squeeze rows
+    return _with(st, d=jnp.zeros_like(st.d), status=status, squeeze_status=st.status, hist=tuple(hist))
 
 
 def simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:

@@ -1,0 +1,127 @@
+"""Grasp quality measures: pure functions of a :class:`~jaxsqueeze.SqueezeResult` (DESIGN 2.9).
+
+Each works on an eager (trimmed) result, a padded one from ``jit``, inside ``vmap`` and under
+``jax.jacfwd``: it reads only the valid rows (``count``) and uses array operations. Formulas
+(rows k of the result; F_i(k) the total force of finger i on the object, x_i(k) its centre):
+
+* :func:`squeeze_work` — the strain energy stored by the squeeze, ½ Σ_nodes F·u at the last
+  squeeze row (the work the fingers did on the object, less what friction dissipated; IJRR
+  2014's "stable squeeze" maximizes it for the same amount of squeezing) [J].
+* :func:`grip_force` — |F_0| at the last squeeze row [N].
+* :func:`slip_margin` — how far the grasp is from total slip at the last squeeze row: each
+  contact node's cone margin sin(φ − ψ) (ψ the angle of its force from the contact normal;
+  1 on the axis, 0 on the cone edge, < 0 outside), then for each finger a smooth maximum over
+  its contacts (a finger holds while any of its contacts sticks) and a smooth minimum over
+  the two fingers (the grasp holds while both do): −τ log Σ_f exp(−τ log Σ_k exp(m_k/τ) … /τ)
+  with temperature ``tau`` (τ → 0 gives max/min exactly) [–].
+* :func:`adversary_work` — the work the pusher does on the object during the adversary
+  phase, W = Σ_k ½ (F_2(k) + F_2(k+1)) · (x_2(k+1) − x_2(k)) [J]: the energy the grasp absorbs
+  in resisting the push (Jia, Guo and Lin, IJRR 2014); larger is better.
+* :func:`finger_work` — (2,) the share of that work each grasping finger resists:
+  W_i = −Σ_k ½ (ΔF_i(k) + ΔF_i(k+1)) · (x_2(k+1) − x_2(k)), ΔF_i the change of finger i's force
+  since the push began; W_0 + W_1 = W by equilibrium.
+* :func:`failure_push` — the push displacement at which the grasp failed (the final push
+  when it held) [m].
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ..simulation.laws import FREE, cone_margin
+from ..simulation.result import SqueezeResult
+
+
+def _rows(res: SqueezeResult):
+    """(valid (k,), squeeze (k,), push (k,)) row masks: recorded rows, squeeze-phase rows, push rows."""
+    k = jnp.arange(jnp.shape(res.depth)[-1])
+    valid = k < res.count
+    squeeze = valid & (jnp.asarray(res.push) == 0)
+    return valid, squeeze, valid & ~squeeze
+
+
+def _squeeze_row(res: SqueezeResult):
+    """Index of the last squeeze-phase row."""
+    return jnp.sum(_rows(res)[1]) - 1
+
+
+def squeeze_work(res: SqueezeResult):
+    """() strain energy stored by the squeeze at its last row [J] (see module docstring)."""
+    r = _squeeze_row(res)
+    F, u = jnp.asarray(res.forces)[r], jnp.asarray(res.boundary_displacement)[r]
+    return 0.5 * jnp.sum(F * u)
+
+
+def grip_force(res: SqueezeResult):
+    """() magnitude of the still finger's total force at the last squeeze row [N]."""
+    r = _squeeze_row(res)
+    on = (jnp.asarray(res.modes)[r] > FREE) & (jnp.asarray(res.finger)[r] == 0)
+    return jnp.linalg.norm(jnp.sum(jnp.where(on[:, None], jnp.asarray(res.forces)[r], 0.0), axis=0))
+
+
+def _softmax(x, mask, tau):
+    big = jnp.max(jnp.where(mask, x, -jnp.inf))
+    big = jnp.where(jnp.isfinite(big), big, 0.0)
+    return big + tau * jnp.log(jnp.sum(jnp.where(mask, jnp.exp((x - big) / tau), 0.0)) + 1e-300)
+
+
+def slip_margin(res: SqueezeResult, friction, tau: float = 0.01):
+    """() smooth slip margin of the grasp at its last squeeze row (see module docstring).
+
+    ``friction``: the Coulomb μ of the squeeze (``scene.friction``). −1 when a finger has no contact.
+    """
+    r = _squeeze_row(res)
+    F = jnp.asarray(res.forces)[r]
+    mode, fg = jnp.asarray(res.modes)[r], jnp.asarray(res.finger)[r]
+    ang = jnp.asarray(res.theta)[r] + jnp.take_along_axis(jnp.asarray(res.alpha)[r], fg.astype(jnp.int32), 0)
+    axis = jnp.stack([jnp.cos(ang), jnp.sin(ang)], -1)
+    fn = jnp.sum(F * axis, -1)
+    ft = axis[:, 0] * F[:, 1] - axis[:, 1] * F[:, 0]
+    norm = jnp.sqrt(fn ** 2 + ft ** 2)
+    m = cone_margin(jnp.arctan(jnp.asarray(friction, F.dtype)), fn, ft) / jnp.where(norm > 0, norm, 1.0)
+    per = []
+    for f in (0, 1):
+        on = (mode > FREE) & (fg == f) & (norm > 0)
+        per.append(jnp.where(jnp.any(on), _softmax(m, on, tau), -1.0))
+    per = jnp.stack(per)
+    return -_softmax(-per, jnp.ones(2, bool), tau)
+
+
+def _push_increments(res: SqueezeResult):
+    valid, _, push = _rows(res)
+    C = jnp.asarray(res.centres)
+    if C.shape[-2] < 3:
+        raise ValueError("this result has no adversary phase: give the scene an Adversary")
+    dx = C[1:, 2] - C[:-1, 2]          # (k-1, 2) pusher moves (it waits at its start in squeeze rows)
+    step = push[1:] & valid[1:]        # increments that end in a push row
+    return _finger_totals(res), dx, step, push
+
+
+def _finger_totals(res: SqueezeResult):
+    F = jnp.asarray(res.forces)
+    fg = jnp.asarray(res.finger)
+    on = jnp.asarray(res.modes) > FREE
+    return jnp.stack([jnp.sum(jnp.where((on & (fg == k))[:, None], F, 0.0), axis=0 if F.ndim == 2 else -2)
+                      for k in range(3)], -2)
+
+
+def adversary_work(res: SqueezeResult):
+    """() work the pusher does on the object during the adversary phase [J] (module docstring)."""
+    forces, dx, step, _ = _push_increments(res)
+    f = forces[:, 2]
+    return jnp.sum(jnp.where(step, jnp.sum(0.5 * (f[1:] + f[:-1]) * dx, -1), 0.0))
+
+
+def finger_work(res: SqueezeResult):
+    """(2,) work each grasping finger resists during the push [J]; they sum to :func:`adversary_work`."""
+    forces, dx, step, _ = _push_increments(res)
+    start = forces[_squeeze_row(res)]
+    out = []
+    for i in (0, 1):
+        dF = forces[:, i] - start[i]
+        out.append(-jnp.sum(jnp.where(step, jnp.sum(0.5 * (dF[1:] + dF[:-1]) * dx, -1), 0.0)))
+    return jnp.stack(out)
+
+
+def failure_push(res: SqueezeResult):
+    """() push displacement [m] at the last row: where the grasp failed, or the full push."""
+    return jnp.asarray(res.push)[res.count - 1]

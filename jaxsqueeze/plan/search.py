@@ -1,0 +1,294 @@
+"""Grasp maps and gradient-based placement search (DESIGN 2.9).
+
+A *candidate* is a placement x = (s_0, s_1, angle): the two fingers' arc lengths [m] along the
+outer boundary and the squeeze-direction offset [rad] (:class:`~jaxsqueeze.Placement`). A
+batch of candidates is evaluated in one compiled ``vmap`` that keeps only a few scalars per
+candidate (:class:`Summary`), never the squeeze history. The search climbs a quality with
+forward-mode gradients (``jax.jacfwd``) and an optax optimizer, from the best cells of a
+coarse map.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from functools import partial
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..simulation.api import squeeze
+from ..simulation.scene import Placement, Scene
+from ..simulation.status import Status
+from . import quality as Q
+
+
+class Summary(NamedTuple):
+    """What a map keeps of each candidate (arrays, batched like the candidates)."""
+
+    status: jax.Array      # Status value
+    quality: jax.Array     # the quality (NaN-free: 0 where the squeeze failed)
+    grip_force: jax.Array  # [N] at the last squeeze row
+    depth: jax.Array       # [m] depth reached
+    margin: jax.Array      # [rad] feasibility margin of the first contacts
+
+
+QUALITIES = ("squeeze_work", "grip_force", "slip_margin", "adversary_work")
+
+
+def quality_of(scene: Scene, quality) -> Callable:
+    """A function result → () for a quality given by name (``QUALITIES``) or as a callable."""
+    if callable(quality):
+        return quality
+    if quality == "slip_margin":
+        mu = scene.friction
+        return lambda res: Q.slip_margin(res, mu)
+    if quality in QUALITIES:
+        if quality == "adversary_work" and scene.adversary is None:
+            raise ValueError("quality 'adversary_work' needs an Adversary on the scene "
+                             "(scene.replace(adversary=jsq.Adversary(s=..., push=...)))")
+        return getattr(Q, quality)
+    raise ValueError(f"quality={quality!r}; choose one of {QUALITIES} or pass a function of a result.")
+
+
+def _placed(scene: Scene, x) -> Scene:
+    return scene.replace(grip=None, placement=Placement(s=x[:2], angle=x[2]))
+
+
+def _summary(scene: Scene, qfn, op, x) -> Summary:
+    res = squeeze(_placed(scene, x), op=op, trim=False)
+    ok = res.status == Status.SUCCESS
+    q = jnp.where(ok, qfn(res), 0.0)
+    return Summary(res.status, q, res.grip_force, res.final_depth, res.margin)
+
+
+@partial(jax.jit, static_argnums=(1,))
+def _batch(scene, qfn, op, X):
+    return jax.vmap(lambda x: _summary(scene, qfn, op, x))(X)
+
+
+_one = jax.jit(_summary, static_argnums=(1,))
+
+
+def _progress(done, total, t0, label):
+    if sys.stderr.isatty():
+        rate = done / max(time.perf_counter() - t0, 1e-9)
+        print(f"\r{label}: {done}/{total} ({rate:.1f}/s)", end="" if done < total else "\n",
+              file=sys.stderr, flush=True)
+
+
+def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "auto", chunk: int = 64,
+             progress: bool = True) -> Summary:
+    """Summaries of candidates ``X`` (B, 3) = (s_0 [m], s_1 [m], angle [rad]) as numpy arrays (B,).
+
+    ``batch``: "vmap" (one compiled ``vmap`` per chunk of ``chunk`` candidates, the last one
+    padded: what pays on a GPU), "loop" (one compiled squeeze called per candidate: faster on
+    a CPU, where a batched loop runs every lane's event location at every step), or "auto"
+    (vmap on an accelerator, loop on the CPU). A failed or infeasible candidate returns its
+    status with quality 0 and costs only its first solve in a loop.
+    """
+    X = np.atleast_2d(np.asarray(X, float))
+    op = scene.operator() if op is None else op
+    qfn = quality_of(scene, quality)
+    if batch == "auto":
+        batch = "loop" if jax.default_backend() == "cpu" else "vmap"
+    if batch not in ("vmap", "loop"):
+        raise ValueError(f"batch={batch!r}; choose 'auto', 'vmap' or 'loop'")
+    out, t0 = [], time.perf_counter()
+    if batch == "loop":
+        for k, x in enumerate(X):
+            out.append(jax.tree.map(lambda a: np.asarray(a)[None], _one(scene, qfn, op, jnp.asarray(x))))
+            if progress and (k % 16 == 15 or k == len(X) - 1):
+                _progress(k + 1, len(X), t0, "grasp map")
+        return Summary(*(np.concatenate(a) for a in zip(*out)))
+    for start in range(0, len(X), chunk):
+        part = X[start:start + chunk]
+        pad = np.concatenate([part, np.repeat(part[-1:], chunk - len(part), 0)]) if len(part) < chunk else part
+        s = _batch(scene, qfn, op, jnp.asarray(pad))
+        out.append(jax.tree.map(lambda a: np.asarray(a)[:len(part)], s))
+        if progress:
+            _progress(min(start + chunk, len(X)), len(X), t0, "grasp map")
+    return Summary(*(np.concatenate(a) for a in zip(*out)))
+
+
+class GraspMap(NamedTuple):
+    """A quality over pairs of boundary positions (finger 0 at s[i], finger 1 at s[j]).
+
+    s: (n,) arc lengths [m]; quality, grip_force, margin: (n, n); status: (n, n) int (the
+    diagonal, where both fingers would sit at one point, is INFEASIBLE_GRIP); angle: the
+    squeeze-direction offset used [rad]; best: (k, 3) the best feasible candidates, best
+    first; evaluations: squeezes run.
+    """
+
+    s: np.ndarray
+    quality: np.ndarray
+    status: np.ndarray
+    grip_force: np.ndarray
+    margin: np.ndarray
+    angle: float
+    best: np.ndarray
+    evaluations: int
+
+    def feasible(self) -> np.ndarray:
+        return self.status == Status.SUCCESS
+
+
+def grid(scene: Scene, spacing=None) -> np.ndarray:
+    """(n,) arc lengths [m] spaced evenly around the outer loop (default: the mean boundary
+    edge, i.e. node spacing)."""
+    P = float(scene.curve().perimeter)
+    if spacing is None:
+        spacing = P / scene.mesh.loops[0] if hasattr(scene.mesh, "loops") else P / scene.mesh.m
+    n = max(int(round(P / float(spacing))), 3)
+    return np.arange(n) * (P / n)
+
+
+def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float = 0.0, op=None,
+              batch: str = "auto", chunk: int = 64, progress: bool = True, keep: int = 8) -> GraspMap:
+    """Evaluate ``quality`` over every pair of boundary positions at ``spacing`` [m].
+
+    Finger roles swapped give the same grasp (the squeeze is linear and total), so each
+    unordered pair is squeezed once and the map is mirrored. Returns a :class:`GraspMap`.
+    """
+    s = grid(scene, spacing)
+    n = len(s)
+    i, j = np.triu_indices(n, 1)
+    X = np.stack([s[i], s[j], np.full(len(i), float(angle))], 1)
+    summ = evaluate(scene, X, quality, op=op, batch=batch, chunk=chunk, progress=progress)
+    full = {}
+    for name in ("quality", "status", "grip_force", "margin"):
+        a = np.full((n, n), Status.INFEASIBLE_GRIP if name == "status" else (0.0 if name != "margin" else -np.pi))
+        v = getattr(summ, name)
+        a[i, j] = v
+        a[j, i] = v
+        full[name] = a
+    ok = summ.status == Status.SUCCESS
+    order = np.argsort(-np.where(ok, summ.quality, -np.inf))[:keep]
+    best = X[order[ok[order]]]
+    return GraspMap(s, full["quality"], full["status"].astype(int), full["grip_force"], full["margin"],
+                    float(angle), best, len(X))
+
+
+def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None) -> np.ndarray:
+    """(k, 3) candidates (s_0, s_1, angle) whose first contacts lie inside both friction cones,
+    found without squeezing (the approach and the cone test only), best margin first."""
+    from ..simulation import api, engine
+
+    s = grid(scene, spacing)
+    i, j = np.triu_indices(len(s), 1)
+    X = np.stack([s[i], s[j], np.full(len(i), float(angle))], 1)
+    op = scene.operator() if op is None else op
+    sc = _placed(scene, X[0])
+    cfg = api.config_of(sc)
+
+    @jax.jit
+    def margins(X):
+        def one(x):
+            g = api.grasp_of(_placed(scene, x), op)
+            return engine.make_model(op, g, cfg).margin
+        return jax.vmap(one)(X)
+
+    m = np.asarray(margins(jnp.asarray(X)))
+    keep = np.flatnonzero(m >= 0)
+    return X[keep[np.argsort(-m[keep])]]
+
+
+class Step(NamedTuple):
+    """One iteration of a search: placement (3,), quality, gradient norm, status."""
+
+    x: np.ndarray
+    quality: float
+    grad_norm: float
+    status: int
+
+
+class Search(NamedTuple):
+    """Result of :func:`optimize_placement`.
+
+    best: the best :class:`Placement` found; quality: its quality; history: one list of
+    :class:`Step` per start; squeezes: forward squeezes run (each gradient is one squeeze
+    carrying 2–3 tangents), including the coarse map's.
+    """
+
+    best: Placement
+    quality: float
+    history: list
+    squeezes: int
+
+
+def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimizer=None, steps: int = 40,
+                       starts: int = 5, coarse_spacing=None, vary_angle: bool = False, op=None,
+                       progress: bool = True) -> Search:
+    """Gradient-based placement search (maximizes ``quality``).
+
+    Args:
+        scene: the scene (its grip/placement is replaced by the candidates).
+        quality: a name in ``QUALITIES`` or a function result → ().
+        init: (k, 2 or 3) starting candidates (s_0, s_1[, angle]); default: the ``starts`` best
+            cells of a coarse map (``coarse_spacing``, default perimeter / 16).
+        optimizer: an optax optimizer (default ``optax.adam(0.02)``) acting on the scaled
+            coordinates u = (2π s_0 / P, 2π s_1 / P, angle) [rad], P the perimeter.
+        steps: iterations per start.
+        vary_angle: also move the squeeze-direction offset (default: keep it).
+    Forward-mode gradients (``jax.jacfwd``) of the quality; a step that lands on a failed or
+    infeasible placement is undone and the step scale halved (the constraint is the status;
+    its margin is in the history). Returns a :class:`Search`.
+    """
+    import optax
+
+    op = scene.operator() if op is None else op
+    qfn = quality_of(scene, quality)
+    P = float(scene.curve().perimeter)
+    scale = np.array([2 * math.pi / P, 2 * math.pi / P, 1.0])
+    optimizer = optax.adam(0.02) if optimizer is None else optimizer
+    squeezes = 0
+    if init is None:
+        cmap = grasp_map(scene, qfn, spacing=coarse_spacing or P / 16, op=op, progress=progress)
+        squeezes += cmap.evaluations
+        init = cmap.best[:starts]
+        if len(init) == 0:
+            raise ValueError("no feasible placement on the coarse map: refine coarse_spacing or change the scene")
+    init = np.atleast_2d(np.asarray(init, float))
+    if init.shape[1] == 2:
+        init = np.concatenate([init, np.zeros((len(init), 1))], 1)
+    mask = np.array([1.0, 1.0, 1.0 if vary_angle else 0.0])
+
+    @jax.jit
+    def value_and_grad(u):
+        def f(u):
+            s = _summary(scene, qfn, op, u / scale)
+            return s.quality, s
+        g, s = jax.jacfwd(f, has_aux=True)(u)
+        return s, g
+
+    histories, best_x, best_q = [], None, -np.inf
+    for k, x0 in enumerate(init):
+        u = jnp.asarray(x0 * scale)
+        state = optimizer.init(u)
+        s, g = value_and_grad(u)
+        squeezes += 1
+        hist, damp = [], 1.0
+        for it in range(steps):
+            ok = int(s.status) == Status.SUCCESS
+            hist.append(Step(np.asarray(u) / scale, float(s.quality), float(jnp.linalg.norm(g * mask)), int(s.status)))
+            if ok and float(s.quality) > best_q:
+                best_q, best_x = float(s.quality), np.asarray(u) / scale
+            updates, new_state = optimizer.update(-g * mask, state, u)
+            u_new = u + damp * updates
+            s_new, g_new = value_and_grad(u_new)
+            squeezes += 1
+            if int(s_new.status) != Status.SUCCESS and ok:
+                damp *= 0.5                 # stepped onto a failed / infeasible placement: undo
+                continue
+            u, state, s, g = u_new, new_state, s_new, g_new
+        hist.append(Step(np.asarray(u) / scale, float(s.quality), float(jnp.linalg.norm(g * mask)), int(s.status)))
+        if int(s.status) == Status.SUCCESS and float(s.quality) > best_q:
+            best_q, best_x = float(s.quality), np.asarray(u) / scale
+        histories.append(hist)
+        if progress and sys.stderr.isatty():
+            print(f"start {k + 1}/{len(init)}: best {best_q:.6g}", file=sys.stderr)
+    if best_x is None:
+        raise ValueError("no start reached a successful squeeze")
+    return Search(Placement(s=best_x[:2], angle=float(best_x[2])), best_q, histories, squeezes)
