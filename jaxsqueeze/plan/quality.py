@@ -100,8 +100,7 @@ def _finger_totals(res: SqueezeResult):
     F = jnp.asarray(res.forces)
     fg = jnp.asarray(res.finger)
     on = jnp.asarray(res.modes) > FREE
-    return jnp.stack([jnp.sum(jnp.where((on & (fg == k))[:, None], F, 0.0), axis=0 if F.ndim == 2 else -2)
-                      for k in range(3)], -2)
+    return jnp.stack([jnp.sum(jnp.where((on & (fg == i))[..., None], F, 0.0), axis=-2) for i in range(3)], -2)
 
 
 def adversary_work(res: SqueezeResult):

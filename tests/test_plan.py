@@ -1,0 +1,131 @@
+"""Grasp planning (DESIGN 2.9): continuous placement, qualities, maps and search."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsqueeze as jsq
+from jaxsqueeze import plan
+from jaxsqueeze.plan import quality as Q
+from physics import nearest, symmetric_square
+
+MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
+
+
+@pytest.fixture(scope="module")
+def ellipse():
+    mesh = jsq.shapes.ellipse(0.06, 0.04, max_edge=0.006)
+    return jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.01),
+                     placement=plan.Placement(s=(0.0, 0.1)), friction=0.5, depth=0.006)
+
+
+@pytest.fixture(scope="module")
+def square():
+    mesh = symmetric_square(0.1, 0.01)
+    grip = (nearest(mesh, (0, -0.05)), nearest(mesh, (0, 0.05)))
+    return jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.01), grip=grip, friction=0.5, depth=0.01)
+
+
+def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
+    """Fingers placed by arc length at the grip nodes touch those nodes first, and the squeeze
+    is the integer-grip squeeze."""
+    a = jsq.squeeze(square)
+    pl = plan.Placement(s=square.arc_length(square.grip))
+    b = jsq.squeeze(square.replace(grip=None, placement=pl))
+    assert b.outcome == jsq.Status.SUCCESS
+    np.testing.assert_array_equal(b.grip, square.grip)
+    np.testing.assert_allclose(b.total_force[-1], a.total_force[-1], rtol=1e-9, atol=1e-12)
+
+
+def test_jacfwd_in_placement_matches_central_differences(ellipse):
+    """d(grip force)/d(s_0, s_1, angle) by jax.jacfwd against central differences (step 1e-6 m
+    or rad; agree to rtol 1e-6 away from event switches)."""
+    P = float(ellipse.curve().perimeter)
+    x0 = np.array([0.01, P / 2 + 0.004, 0.05])
+
+    def f(x):
+        return jsq.squeeze(ellipse.replace(placement=plan.Placement(s=x[:2], angle=x[2]))).grip_force
+
+    J = jax.jacfwd(f)(jnp.asarray(x0))
+    for k in range(3):
+        h = np.eye(3)[k] * 1e-6
+        fd = (float(f(x0 + h)) - float(f(x0 - h))) / 2e-6
+        assert abs(fd) > 1e-3
+        np.testing.assert_allclose(J[k], fd, rtol=1e-6)
+
+
+def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
+    """A batch with one placement whose contacts leave the cones and one whose finger cannot
+    touch returns their statuses (never NaN, never an exception) beside a good one."""
+    P = float(ellipse.curve().perimeter)
+    X = np.array([[0.0, P / 2, 0.0],             # across the major axis: feasible
+                  [0.0, 0.02, 0.0],              # neighbouring points: outside the cones
+                  [0.0, P / 2, np.pi / 2]])      # squeezing along the tangent: the fingers miss
+    s = plan.evaluate(ellipse, X, batch="vmap", chunk=3, progress=False)
+    assert list(s.status) == [jsq.Status.SUCCESS, jsq.Status.INFEASIBLE_GRIP, jsq.Status.INFEASIBLE_GRIP]
+    assert s.margin[0] > 0 and s.margin[1] < 0 and s.margin[2] < 0
+    assert np.all(np.isfinite(s.quality)) and s.quality[1] == 0 and s.quality[2] == 0
+    loop = plan.evaluate(ellipse, X, batch="loop", progress=False)
+    np.testing.assert_array_equal(loop.status, s.status)
+    np.testing.assert_allclose(loop.quality, s.quality, rtol=1e-9)
+    cands = plan.candidate_pairs(ellipse, spacing=P / 12)
+    assert len(cands) > 0
+    assert np.all(plan.evaluate(ellipse, cands[:2], progress=False).margin >= 0)
+
+
+def test_squeeze_work_is_the_work_of_the_squeezing_finger(square):
+    """Full stick dissipates nothing: the strain energy equals ∫ F_1 · e dd (trapezoid over the
+    recorded rows; the force is linear between events, so the rule is exact up to round-off
+    where rows straddle no event)."""
+    res = jsq.squeeze(square.replace(friction_model="stick"))
+    e = np.array([0.0, -1.0])
+    f1 = np.asarray(res.total_force)[:, 1] @ e
+    d = np.asarray(res.depth)
+    work = np.sum(0.5 * (f1[1:] + f1[:-1]) * np.diff(d))
+    np.testing.assert_allclose(float(Q.squeeze_work(res)), work, rtol=2e-3)
+    np.testing.assert_allclose(float(Q.grip_force(res)), float(res.grip_force), rtol=1e-12)
+
+
+def test_slip_margin_shrinks_as_the_grip_slants(square):
+    """Forces along the contact normals give a margin near sin(atan μ); a slanted grip less."""
+    mu = 0.5
+    m0 = float(Q.slip_margin(jsq.squeeze(square), mu))
+    mesh = square.mesh
+    slanted = square.replace(grip=(nearest(mesh, (-0.01, -0.05)), nearest(mesh, (0.01, 0.05))))
+    m1 = float(Q.slip_margin(jsq.squeeze(slanted), mu))
+    assert 0.8 * np.sin(np.arctan(mu)) < m0 <= np.sin(np.arctan(mu)) + 0.05
+    assert m1 < m0
+
+
+def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
+    """An adversary pushing the squeezed square at mid-height of a free side, toward its centre:
+    both grasping fingers resist equally (to 1 %: the push point is the material point, and
+    the interpolation along one boundary span breaks the mirror symmetry slightly), and their
+    shares add up to the pusher's work."""
+    k = nearest(square.mesh, (0.05, 0.0))
+    sc = square.replace(adversary=plan.Adversary(s=float(square.arc_length([k])[0]), push=0.003))
+    res = jsq.squeeze(sc)
+    assert res.outcome == jsq.Status.SUCCESS and int(res.squeeze_status) == jsq.Status.SUCCESS
+    W = float(Q.adversary_work(res))
+    w = np.asarray(Q.finger_work(res))
+    assert W > 0
+    np.testing.assert_allclose(w.sum(), W, rtol=1e-9)
+    np.testing.assert_allclose(w[0], w[1], rtol=1e-2)
+    F = np.asarray(res.finger_forces)[-1]
+    np.testing.assert_allclose(F.sum(0), 0, atol=1e-7 * np.abs(F).max())     # three-finger balance
+    assert float(Q.failure_push(res)) == pytest.approx(0.003)
+
+
+def test_search_reaches_the_best_of_the_exhaustive_map(ellipse):
+    """Two starts from a coarse map reach (or pass) the best quality of a finer exhaustive map,
+    with fewer squeezes."""
+    P = float(ellipse.curve().perimeter)
+    fine = plan.grasp_map(ellipse, "squeeze_work", spacing=P / 24, progress=False)
+    best = float(fine.quality[fine.feasible()].max())
+    found = plan.optimize_placement(ellipse, "squeeze_work", starts=2, steps=8, coarse_spacing=P / 8,
+                                    progress=False)
+    assert found.quality >= 0.98 * best
+    assert found.squeezes < fine.evaluations
+    res = jsq.squeeze(ellipse.replace(placement=found.best))
+    assert res.outcome == jsq.Status.SUCCESS
+    np.testing.assert_allclose(float(Q.squeeze_work(res)), found.quality, rtol=1e-9)
