@@ -105,7 +105,7 @@ def _sparse_breakdown(mesh, nu, chunk=128):
     from jaxsqueeze import fem
 
     t0 = time.perf_counter()
-    K = fem._scipy_stiffness(mesh, float(nu))
+    K = fem.scipy_stiffness(mesh, float(nu))
     b = np.asarray(mesh.boundary)
     bdofs = np.stack([2 * b, 2 * b + 1], axis=1).reshape(-1)
     pts = mesh.points / fem.object_length(mesh)

@@ -4,7 +4,8 @@ Layers, each importing only from the ones above it in this list:
 
 * :mod:`jaxsqueeze.geometry`   mesh, shapes, curves, boundary
 * :mod:`jaxsqueeze.mechanics`  material, fem, operator, band, bordered, linalg
-* :mod:`jaxsqueeze.simulation` scene, laws, engine, result, status, api (``squeeze``)
+* :mod:`jaxsqueeze.simulation` scene, laws, validate, engine, result, status, api (``squeeze``)
+* :mod:`jaxsqueeze.plan`       quality, search (placement, grasp maps, optax search)
 * :mod:`jaxsqueeze.post`       views, cones, plots, export
 * :mod:`jaxsqueeze.io`         scenefile, cli
 
@@ -27,7 +28,7 @@ from .mechanics.operator import Compliance
 from .simulation import scene
 from .simulation.api import squeeze
 from .simulation.result import EventLog, SqueezeResult
-from .simulation.scene import Fingers, Scene, Settings
+from .simulation.scene import Adversary, Fingers, Placement, Scene, Settings
 from .simulation.status import Status
 
 #: old flat module name -> its home in the layered package
@@ -42,15 +43,19 @@ MODULES = {
     "scenefile": "io.scenefile", "cli": "io.cli",
 }
 
-__all__ = ["Compliance", "Deformation", "EventLog", "Fingers", "Material", "Mesh", "Scene", "Settings",
-           "SqueezeResult", "Status", "deform", "fem", "read_mesh", "scene", "shapes", "squeeze", "write_mesh"]
-__version__ = "0.2.0"
+__all__ = ["Adversary", "Compliance", "Deformation", "EventLog", "Fingers", "Material", "Mesh", "Placement", "Scene",
+           "Settings", "SqueezeResult", "Status", "deform", "fem", "grasp_map", "optimize_placement", "plan", "quality",
+           "read_mesh", "scene", "shapes", "squeeze", "write_mesh"]
 
 
 def __getattr__(name):
     if name in MODULES:
         return importlib.import_module(f"{__name__}.{MODULES[name]}")
+    if name in ("plan", "quality", "grasp_map", "optimize_placement", "candidate_pairs"):
+        plan = importlib.import_module(f"{__name__}.plan")
+        return plan if name == "plan" else getattr(plan, name)
     raise AttributeError(f"module 'jaxsqueeze' has no attribute {name!r}")
+__version__ = "0.2.0"
 
 
 class _AliasFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):

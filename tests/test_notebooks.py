@@ -10,7 +10,7 @@ nbclient = pytest.importorskip("nbclient")
 pytest.importorskip("ipykernel")
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-NOTEBOOKS = ["01_quickstart.ipynb", "02_paper_figures.ipynb", "03_bands.ipynb"]
+NOTEBOOKS = ["01_quickstart.ipynb", "02_paper_figures.ipynb", "03_bands.ipynb", "04_grasp_planning.ipynb"]
 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)

@@ -87,7 +87,8 @@ def null_space(points) -> jax.Array:
     return w / jnp.linalg.norm(w, axis=0)
 
 
-def _scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
+def scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
+    """The stiffness matrix K (2n, 2n) as a scipy CSC matrix in float64 (the host-side build)."""
     with jax.enable_x64(True):   # the host-side build is always float64
         ke = np.asarray(element_matrices(jnp.asarray(mesh.points, jnp.float64), jnp.asarray(mesh.triangles), nu))
     rows, cols = _coo(mesh.triangles)
@@ -180,7 +181,7 @@ def _spectral_build(pts, triangles, nu, bdofs, pins):
 
 
 def _sparse_build(mesh: Mesh, nu, pts, bdofs, pins, chunk: int = 128):
-    K = _scipy_stiffness(mesh, float(nu))
+    K = scipy_stiffness(mesh, float(nu))
     n2 = K.shape[0]
     keep = np.ones(n2, bool)
     keep[pins] = False
