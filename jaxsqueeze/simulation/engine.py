@@ -97,8 +97,11 @@ def cross2(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-class Model(NamedTuple):
-    """Everything fixed during one loading phase, in scaled units (lengths / L).
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class Model:
+    """Everything fixed during one loading phase, in scaled units (lengths / L). A pytree: the
+    configuration is static, everything else an array leaf.
 
     The fingertip centres move linearly with the phase's load parameter λ (the squeeze depth
     d in the squeeze phase, the push displacement in the adversary phase):
@@ -107,7 +110,7 @@ class Model(NamedTuple):
     """
 
     op: Compliance
-    cfg: Config
+    cfg: Config = dataclasses.field(metadata=dict(static=True))
     base: jax.Array      # (F, 2) centres at λ = 0
     dirn: jax.Array      # (F, 2) centre velocity per unit λ
     present: jax.Array   # (F,) bool: the finger takes part in contact in this phase
@@ -243,7 +246,7 @@ def push_model(model: Model, grasp: Grasp, st) -> Model:
     base = model.centres(st.d).at[2].set(o + t * v)
     dirn = jnp.zeros_like(model.dirn).at[2].set(v)
     h = step / L
-    return model._replace(base=base, dirn=dirn, present=jnp.ones_like(model.present), r=model.r.at[2].set(r3),
+    return dataclasses.replace(model, base=base, dirn=dirn, present=jnp.ones_like(model.present), r=model.r.at[2].set(r3),
                           rot_depth=jnp.stack([st.d, jnp.zeros((), dt)]), D=push / L, h=h,
                           ev_tol=h * 1e-4, eta=jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps),
                           phase=jnp.array(1, jnp.int32))
