@@ -53,9 +53,7 @@ def squeeze_work(res: SqueezeResult):
 
 def grip_force(res: SqueezeResult):
     """() magnitude of the still finger's total force at the last squeeze row [N]."""
-    r = _squeeze_row(res)
-    on = (jnp.asarray(res.modes)[r] > FREE) & (jnp.asarray(res.finger)[r] == 0)
-    return jnp.linalg.norm(jnp.sum(jnp.where(on[:, None], jnp.asarray(res.forces)[r], 0.0), axis=0))
+    return jnp.linalg.norm(jnp.asarray(res.finger_forces)[_squeeze_row(res), 0])
 
 
 def _softmax(x, mask, tau):
@@ -93,14 +91,7 @@ def _push_increments(res: SqueezeResult):
         raise ValueError("this result has no adversary phase: give the scene an Adversary")
     dx = C[1:, 2] - C[:-1, 2]          # (k-1, 2) pusher moves (it waits at its start in squeeze rows)
     step = push[1:] & valid[1:]        # increments that end in a push row
-    return _finger_totals(res), dx, step, push
-
-
-def _finger_totals(res: SqueezeResult):
-    F = jnp.asarray(res.forces)
-    fg = jnp.asarray(res.finger)
-    on = jnp.asarray(res.modes) > FREE
-    return jnp.stack([jnp.sum(jnp.where((on & (fg == i))[..., None], F, 0.0), axis=-2) for i in range(3)], -2)
+    return jnp.asarray(res.finger_forces), dx, step, push
 
 
 def adversary_work(res: SqueezeResult):

@@ -138,23 +138,19 @@ class SqueezeResult:
         return self._last(self.forces)
 
     @property
-    def total_force(self):
-        """(k, 2, 2) total force of each finger (axis -2: finger 0, 1) on the object [N], per row."""
+    def finger_forces(self):
+        """(k, F, 2) total force of every finger on the object [N], per row (F = 3 with an adversary)."""
         xp = self._xp
         F = xp.asarray(self.forces)
         fg = xp.asarray(self.finger)
         on = xp.asarray(self.modes) > 0
-        return xp.stack([xp.sum(xp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in (0, 1)], -2)
+        n = np.shape(self.centres)[-2]
+        return xp.stack([xp.sum(xp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in range(n)], -2)
 
     @property
-    def finger_forces(self):
-        """(k, F, 2) total force of every finger on the object [N] (F = 3 with an adversary)."""
-        xp = self._xp
-        F = xp.asarray(self.forces)
-        fg = xp.asarray(self.finger)
-        on = xp.asarray(self.modes) > 0
-        n = xp.shape(self.centres)[-2]
-        return xp.stack([xp.sum(xp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in range(n)], -2)
+    def total_force(self):
+        """(k, 2, 2) total force of each grasping finger (axis -2: finger 0, 1) on the object [N], per row."""
+        return self.finger_forces[..., :2, :]
 
     @property
     def grip_force(self):
