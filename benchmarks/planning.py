@@ -31,11 +31,11 @@ COLS = ["object", "nodes", "boundary", "fine_pairs", "fine_s", "fine_best", "sea
 
 def objects(quick):
     import jaxsqueeze as jsq
-    out = {"foam square": jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01)}
+    out = {"foam square": jsq.shapes.rectangle(0.1, 0.1, max_edge=0.006)}
     if not quick:
-        out["ellipse"] = jsq.shapes.ellipse(0.06, 0.04, max_edge=0.008)
+        out["ellipse"] = jsq.shapes.ellipse(0.06, 0.04, max_edge=0.006)
         out["L-shape"] = jsq.shapes.polygon([(0, 0), (0.1, 0), (0.1, 0.05), (0.05, 0.05), (0.05, 0.1), (0, 0.1)],
-                                            max_edge=0.01)
+                                            max_edge=0.006)
     return out
 
 
