@@ -1,0 +1,118 @@
+"""A planning job, as the command line runs it: a grasp map, a gradient search on it, the best
+grasp squeezed (and pushed by the adversary when the scene has one), and the pictures and
+summary written to a folder. ``jaxsqueeze plan SCENE.toml --out DIR`` calls :func:`run_plan`."""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """The ``[plan]`` section of a scene file.
+
+    quality: a name in ``jaxsqueeze.plan.search.QUALITIES`` (default "squeeze_work"; with
+        ``push`` the default is "adversary_work").
+    spacing: grid spacing of the map [m] (default: perimeter / 24).
+    starts: starts of the search (from the best map cells); steps: iterations per start.
+    optimizer: an optax optimizer name ("adam", "sgd", "adabelief", ...); learning_rate: its
+        step on the scaled coordinates 2πs/P [rad].
+    push: adversary push [m] (0: none); push_at: arc length of the pushed point [m] (default:
+        a quarter of the perimeter past finger 0); push_angle: offset from the inward normal [rad].
+    """
+
+    quality: str | None = None
+    spacing: float | None = None
+    starts: int = 5
+    steps: int = 30
+    optimizer: str = "adam"
+    learning_rate: float = 0.02
+    push: float = 0.0
+    push_at: float | None = None
+    push_angle: float = 0.0
+
+
+KEYS = tuple(PlanSettings.__dataclass_fields__)
+
+
+def _clean(v):
+    """JSON-safe numbers: NaN and infinities become null."""
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        return float(v) if math.isfinite(v) else None
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> dict:
+    """Map, search, squeeze the best grasp, write pictures and ``summary.json`` into ``out``.
+
+    Returns the summary (a dict)."""
+    import optax
+
+    import jaxsqueeze as jsq
+    from ..plan import quality as Q
+    from ..plan.search import grasp_map, optimize_placement, quality_of
+    from ..post import plots
+    from ..post.maps import plot_grasp_map
+    from ..simulation.scene import Adversary, Placement
+
+    P = float(scene.curve().perimeter)
+    if scene.placement is None:
+        scene = scene.replace(placement=Placement(s=scene.arc_length(scene.grip)), grip=None)
+    if settings.push > 0:
+        s3 = settings.push_at if settings.push_at is not None else float(np.asarray(scene.placement.s)[0]) + P / 4
+        scene = scene.replace(adversary=Adversary(s=s3, push=settings.push, angle=settings.push_angle))
+    name = settings.quality or ("adversary_work" if settings.push > 0 else "squeeze_work")
+    qfn = quality_of(scene, name)
+    try:
+        opt = getattr(optax, settings.optimizer)(settings.learning_rate)
+    except AttributeError:
+        raise ValueError(f"plan.optimizer={settings.optimizer!r} is not an optax optimizer") from None
+    op = scene.operator()
+    gmap = grasp_map(scene, qfn, spacing=settings.spacing or P / 24, op=op, progress=progress)
+    found = optimize_placement(scene, qfn, optimizer=opt, steps=settings.steps, starts=settings.starts,
+                               init=gmap.best[:settings.starts] if len(gmap.best) else None, op=op,
+                               progress=progress)
+    best = scene.replace(placement=found.best)
+    res = jsq.squeeze(best, op=op)
+    os.makedirs(out, exist_ok=True)
+    paths = {}
+    fig = plot_grasp_map(gmap, found, label=name)
+    paths["map_png"] = os.path.join(out, "map.png")
+    fig.savefig(paths["map_png"])
+    fig = plots.plot_deformed(res, scene.mesh, title=f"best grasp: {name} = {found.quality:.4g}")
+    paths["best_png"] = os.path.join(out, "best.png")
+    fig.savefig(paths["best_png"])
+    ok = gmap.feasible()
+    summary = {
+        "quality": name,
+        "best": {"s": np.asarray(found.best.s).tolist(), "angle": float(found.best.angle), "quality": found.quality,
+                 "status": res.outcome.name, "grip_force_N": float(res.grip_force),
+                 "squeeze_work_J": float(Q.squeeze_work(res))},
+        "map": {"spacing_m": float(gmap.s[1] - gmap.s[0]), "positions": len(gmap.s), "squeezes": gmap.evaluations,
+                "feasible_pairs": int(ok.sum() // 2),
+                "best": [{"s": [float(x[0]), float(x[1])], "angle": float(x[2])} for x in gmap.best]},
+        "search": {"squeezes": found.squeezes, "starts": len(found.history),
+                   "paths": [[{"s": h.x[:2].tolist(), "angle": float(h.x[2]), "quality": h.quality,
+                               "grad_norm": h.grad_norm, "status": int(h.status)} for h in hist]
+                             for hist in found.history]},
+        "perimeter_m": P,
+        "files": paths,
+    }
+    if scene.adversary is not None:
+        summary["best"].update(adversary_work_J=float(Q.adversary_work(res)),
+                               finger_work_J=np.asarray(Q.finger_work(res)).tolist(),
+                               failure_push_m=float(Q.failure_push(res)),
+                               squeeze_status=jsq.Status(int(res.squeeze_status)).name)
+    with open(os.path.join(out, "summary.json"), "w", encoding="utf-8") as f:
+        json.dump(_clean(summary), f, indent=2, allow_nan=False)
+    return summary
