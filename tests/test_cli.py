@@ -233,7 +233,7 @@ def test_bad_scene_file(case, tmp_path, capsys):
     rc = cli.main(["run", str(path), "--out", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2
-    assert err and err[-1].startswith(f"error: {key}: "), err
+    assert err and any(line.startswith(f"error: {key}: ") for line in err), err
     assert not out.exists()
 
 

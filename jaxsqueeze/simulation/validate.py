@@ -400,11 +400,7 @@ def check_costs(m: int, n: int, method: str, capacity: int, max_steps: int, max_
     (default :data:`MEMORY_LIMIT`), naming the estimate and the setting to change."""
     limit = MEMORY_LIMIT if limit is None else int(limit)
     out = []
-    if int(capacity) > max(int(m), 2):
-        out.append(f"settings.capacity = {capacity}: more contact slots than the {m} boundary nodes that can "
-                   f"touch a finger; use at most {max(m, 2)} (the default is 64)")
-    hb = history_bytes(m, min(int(capacity), max(int(m), 2)) if int(capacity) > m else capacity,
-                       max_steps, max_events, dtype)
+    hb = history_bytes(m, capacity, max_steps, max_events, dtype)
     if hb > limit:
         out.append(f"settings.max_steps = {max_steps}, settings.max_events = {max_events}, settings.capacity = "
                    f"{capacity}: the history and event log would take about {_gib(hb)} (limit {_gib(limit)}, "
