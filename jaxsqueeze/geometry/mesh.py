@@ -327,8 +327,13 @@ def read_mesh(path) -> Mesh:
         raise ValueError(f"no such mesh file: {path}")
     if os.path.getsize(path) == 0:
         raise ValueError(f"mesh file {path} is empty (0 bytes)")
+    import contextlib
+    import io
+
+    noise = io.StringIO()         # meshio prints its own "Error: ..." before sys.exit; ours says it
     try:
-        m = meshio.read(path)
+        with contextlib.redirect_stderr(noise), contextlib.redirect_stdout(noise):
+            m = meshio.read(path)
     except (KeyboardInterrupt, MemoryError):
         raise
     except SystemExit:     # meshio calls sys.exit on some unreadable files (text, renamed images)

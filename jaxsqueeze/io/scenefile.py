@@ -538,21 +538,22 @@ def _fingers(fin):
 
 
 def _check_grip_points(errs, mesh, points, grip):
-    """A grip point must lie within a few boundary edge lengths of the boundary node it
+    """A grip point must lie within twice the boundary edges next to the boundary node it
     snaps to (not 50 m off the object, not at its centre)."""
     P = np.asarray(mesh.points) + np.asarray(mesh.offset)
-    try:
-        b = np.asarray(mesh.boundary)
-        nxt = np.concatenate([np.roll(lp, -1) for lp in np.split(b, np.cumsum(mesh.loops)[:-1])])
-        h = float(np.linalg.norm(P[nxt] - P[b], axis=1).max())
-    except Exception:  # noqa: BLE001 - a band: equal spacing
-        h = float(np.max(np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)))
+    b = np.asarray(mesh.boundary) if hasattr(mesh, "loops") and hasattr(mesh, "triangles") else np.arange(len(P))
+    loops = np.split(b, np.cumsum(mesh.loops)[:-1]) if hasattr(mesh, "loops") else [b]
+    nxt = np.concatenate([np.roll(lp, -1) for lp in loops])
+    prv = np.concatenate([np.roll(lp, 1) for lp in loops])
+    where = {int(v): k for k, v in enumerate(b)}
     for k, (xy, node) in enumerate(zip(points, grip)):
+        i = where[int(node)]
+        h = max(np.linalg.norm(P[nxt[i]] - P[node]), np.linalg.norm(P[prv[i]] - P[node]))
         d = float(np.linalg.norm(P[node] - xy))
-        if d > 3 * h:
+        if d > 2 * h:
             errs.add(SceneFileError("grip.points", f"point {k + 1} {list(map(float, xy))} is {d:.3g} m from the "
-                                    f"nearest boundary node {node} at {P[node].tolist()}, more than 3 boundary edge "
-                                    f"lengths ({3 * h:.3g} m): put the grip points on the object's outline"))
+                                    f"nearest boundary node {node} at {P[node].tolist()}, more than twice the "
+                                    f"boundary edges there ({h:.3g} m): put the grip points on the object's outline"))
 
 
 def _grip_distance(mesh, grip) -> float:

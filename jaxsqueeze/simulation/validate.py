@@ -402,10 +402,16 @@ def check_costs(m: int, n: int, method: str, capacity: int, max_steps: int, max_
     out = []
     hb = history_bytes(m, capacity, max_steps, max_events, dtype)
     if hb > limit:
-        out.append(f"settings.max_steps = {max_steps}, settings.max_events = {max_events}, settings.capacity = "
-                   f"{capacity}: the history and event log would take about {_gib(hb)} (limit {_gib(limit)}, "
-                   "jaxsqueeze.simulation.validate.MEMORY_LIMIT / env JAXSQUEEZE_MEMORY_LIMIT); lower max_steps "
-                   "(default 400) and max_events (default 256)")
+        parts = {"max_steps": history_bytes(m, 0, max_steps, 0, dtype),
+                 "max_events": history_bytes(m, 0, 0, max_events, dtype),
+                 "capacity": history_bytes(m, capacity, 0, 0, dtype)}
+        dom = max(parts, key=parts.get)
+        value = {"max_steps": max_steps, "max_events": max_events, "capacity": capacity}
+        default = {"max_steps": 400, "max_events": 256, "capacity": 64}
+        out.append(f"settings.{dom} = {value[dom]}: the history, event log and contact slots would take about "
+                   f"{_gib(hb)} (max_steps = {max_steps}, max_events = {max_events}, capacity = {capacity}; limit "
+                   f"{_gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env JAXSQUEEZE_MEMORY_LIMIT); "
+                   f"lower {dom} (default {default[dom]})")
     cb = compliance_bytes(m, n, method, dtype)
     if cb > limit:
         out.append(f"the {method} compliance build of {n} nodes ({m} on the boundary) would take about "
