@@ -290,3 +290,57 @@ def test_read_errors(tmp_path):
     meshio.write(path, meshio.Mesh(tilted, [("triangle", np.array([[0, 1, 2]]))]))
     with pytest.raises(ValueError, match=r"not planar: nodes 1"):
         read_mesh(path)
+
+
+# ----------------------------------------------------------------------------- issue 12: bad meshes
+
+
+def test_hanging_node_is_refused_naming_it():
+    # left: one big triangle 0-1-2 along the edge 1-2; right: two triangles meeting at node 4,
+    # the midpoint of edge 1-2 (a T-junction: the object would be cracked along 1-2)
+    pts = np.array([[0, 0], [1, 0], [1, 1], [2, 0], [1, 0.5], [2, 1.0]])
+    tri = np.array([[0, 1, 2], [1, 3, 4], [4, 3, 5], [4, 5, 2]])
+    with pytest.raises(ValueError, match=r"hanging nodes \(T-junctions\) 4\b.*\(1, 2\)|hanging nodes \(T-junctions\) 4\b.*\(2, 1\)"):
+        Mesh.from_arrays(pts, tri)
+
+
+def test_mixed_triangles_and_quads_are_refused_naming_the_cells(tmp_path):
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0.0]])
+    path = tmp_path / "mixed.vtu"
+    meshio.write(path, meshio.Mesh(pts, [("triangle", np.array([[0, 1, 2], [0, 2, 3]])),
+                                         ("quad", np.array([[1, 4, 5, 2]]))]))
+    with pytest.raises(ValueError, match=r"mixes triangles with 1 quad cells \(block 1, cells 2\.\.2"):
+        read_mesh(path)
+
+
+@pytest.mark.parametrize("content,match", [
+    (b"", "is empty"),
+    (b"this is not a mesh\n", "could not be read"),
+    (b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4, "could not be read"),
+])
+def test_unreadable_mesh_files_raise_value_error(tmp_path, content, match):
+    path = tmp_path / "part.vtu"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=match) as e:
+        read_mesh(path)
+    assert "part.vtu" in str(e.value)
+    with pytest.raises(ValueError, match="is a folder"):
+        read_mesh(tmp_path)
+
+
+def test_element_count_guard_before_meshing():
+    import time
+
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=r"about \d\.\d+e\+10 triangles.*MAX_ELEMENTS"):
+        shapes.rectangle(0.1, 0.1, max_edge=1e-6)
+    with pytest.raises(ValueError, match=r"units look mixed"):
+        shapes.rectangle(100.0, 100.0, max_edge=0.004)
+    with pytest.raises(ValueError, match=r"triangles"):
+        shapes.disk(0.05, max_edge=1e-6)
+    with pytest.raises(ValueError, match=r"triangles"):
+        shapes.polygon([[0, 0], [0.1, 0], [0, 0.1]], max_edge=1e-6)
+    assert time.perf_counter() - t < 1.0
+    n_est, m_est = shapes.estimate("rectangle", 0.1, 0.1, max_edge=0.004)
+    m = shapes.rectangle(0.1, 0.1, max_edge=0.004)
+    assert 0.7 < n_est / len(m.triangles) < 1.4 and 0.7 < m_est / m.m < 1.4

@@ -58,8 +58,8 @@ class Mesh:
 
         Raises:
             ValueError: on bad shapes, non-finite coordinates, out-of-range indices,
-                degenerate or inverted triangles, duplicate nodes, non-manifold edges or
-                vertices, or a mesh in more than one piece. Messages use the caller's
+                degenerate or inverted triangles, duplicate nodes, hanging nodes
+                (T-junctions), non-manifold edges or vertices, or a mesh in more than one piece. Messages use the caller's
                 node and triangle indices.
         """
         pts, tri = _check_arrays(points, triangles)
@@ -68,6 +68,7 @@ class Mesh:
         pts = pts[used]
         tri = _orient(pts, tri, used)
         _check_duplicates(pts, used)
+        _check_hanging(pts, tri, used)
         bnext = _boundary_edges(tri, used)
         _check_connected(tri)
         offset = pts.mean(axis=0)
@@ -177,6 +178,39 @@ def _check_duplicates(pts, used):
                          f"{_few(pts[pairs[:, 0]])}; merge them and renumber the triangles")
 
 
+def _check_hanging(pts, tri, used):
+    """Reject hanging nodes (T-junctions): a node inside an edge of a neighbouring triangle
+    without being one of its corners cracks the object there (the two sides are not joined)."""
+    from scipy.spatial import cKDTree
+
+    directed, inverse, counts = _edge_table(tri)
+    edges = directed[counts[inverse] == 1]               # edges used by one triangle
+    if not len(edges):
+        return
+    cand = np.unique(edges)
+    a, b = pts[edges[:, 0]], pts[edges[:, 1]]
+    mid, half = 0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=1)
+    tree = cKDTree(pts[cand])
+    hits = []
+    for e, near in enumerate(tree.query_ball_point(mid, half * (1 + 1e-9))):
+        for c in near:
+            node = cand[c]
+            if node in (edges[e, 0], edges[e, 1]):
+                continue
+            d = b[e] - a[e]
+            L2 = float(d @ d)
+            t = float((pts[node] - a[e]) @ d) / L2
+            off = abs(float(d[0] * (pts[node, 1] - a[e, 1]) - d[1] * (pts[node, 0] - a[e, 0]))) / np.sqrt(L2)
+            if 1e-9 < t < 1 - 1e-9 and off <= 1e-9 * np.sqrt(L2):
+                hits.append((node, e))
+    if hits:
+        nodes = sorted({int(used[n]) for n, _ in hits})
+        pairs = [tuple(int(v) for v in used[edges[e]]) for _, e in hits]
+        raise ValueError(f"hanging nodes (T-junctions) {_few(nodes)}: they lie inside the edges (nodes) "
+                         f"{_few(pairs)} of neighbouring triangles without being their corners, so the object "
+                         "would be cracked there; split those triangles at the hanging node (a conforming mesh)")
+
+
 def _edge_table(tri):
     """Directed edges (3t, 2) of the triangles, the undirected edge id of each, and the
     number of triangles using each undirected edge."""
@@ -282,20 +316,48 @@ def read_mesh(path) -> Mesh:
         ValueError: no triangle cells in the file, or nodes off the z = 0 plane, or any
             :meth:`Mesh.from_arrays` error.
     """
+    import os
+
     import meshio
 
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise ValueError(f"mesh file {path} is a folder, not a mesh file")
+    if not os.path.isfile(path):
+        raise ValueError(f"no such mesh file: {path}")
+    if os.path.getsize(path) == 0:
+        raise ValueError(f"mesh file {path} is empty (0 bytes)")
+    import contextlib
+    import io
+
+    noise = io.StringIO()         # meshio prints its own "Error: ..." before sys.exit; ours says it
     try:
-        m = meshio.read(path)
-    except (OSError, meshio.ReadError):
+        with contextlib.redirect_stderr(noise), contextlib.redirect_stdout(noise):
+            m = meshio.read(path)
+    except (KeyboardInterrupt, MemoryError):
         raise
-    except Exception as exc:  # meshio fails obscurely on empty cell blocks
-        raise ValueError(f"could not read a triangle mesh from {path}: {exc!r}. A mesh file needs at least one "
-                         "triangle cell block with nodes.") from exc
+    except SystemExit:     # meshio calls sys.exit on some unreadable files (text, renamed images)
+        raise ValueError(f"mesh file {path} could not be read: meshio gave up on it (wrong format for its "
+                         "suffix, or not a mesh file); export it again, e.g. as gmsh .msh or .vtu") from None
+    except BaseException as exc:  # noqa: BLE001 - meshio's errors are of many types
+        raise ValueError(f"mesh file {path} could not be read as a mesh: {type(exc).__name__}: {exc}. "
+                         "Check that the file is a mesh in the format its suffix says (.msh, .vtu, ...) and "
+                         "holds at least one triangle cell block") from None
     blocks = [c.data for c in m.cells if c.type == "triangle"]
     if not blocks:
         found = sorted({c.type for c in m.cells}) or ["no cells"]
         raise ValueError(f"no triangle cells in {path}; found: {', '.join(found)}. "
                          "jaxsqueeze needs linear 3-node triangles (mesh with element order 1)")
+    # other area cells beside the triangles would be dropped (a hole where they were): refuse
+    start, other = 0, []
+    for k, c in enumerate(m.cells):
+        if c.type not in ("triangle", "vertex", "line", "line3"):
+            other.append(f"{len(c.data)} {c.type} cells (block {k}, cells {start}..{start + len(c.data) - 1} "
+                         "counting all blocks)")
+        start += len(c.data)
+    if other:
+        raise ValueError(f"{path} mixes triangles with {'; '.join(other)}; jaxsqueeze would have to drop them "
+                         "(half an object). Mesh with 3-node triangles only (gmsh: no Recombine, element order 1)")
     pts = np.asarray(m.points, dtype=np.float64)
     if pts.ndim == 2 and pts.shape[1] == 3:
         xy = pts[:, :2]

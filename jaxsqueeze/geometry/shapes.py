@@ -18,8 +18,16 @@ d(x) the distance to the nearest refinement point, ``GRADING = 0.3``. Defaults:
 ``refine_edge = max_edge / 4``, ``refine_radius = 2 * max_edge``. The outline is sampled
 with spacing h(x); the interior is refined by a few Triangle ``-r`` passes with a per-
 triangle area bound from h at each triangle's centroid.
+
+Cost guard. Before meshing, every shape estimates its element count from the outline's
+area and the target edge lengths (:func:`estimate_elements`) and refuses, with the
+estimate and a hint about mixed units, above ``MAX_ELEMENTS`` (a setting: assign
+``jaxsqueeze.geometry.shapes.MAX_ELEMENTS`` or set the environment variable
+``JAXSQUEEZE_MAX_ELEMENTS``; default 2,000,000 triangles).
 """
 from __future__ import annotations
+
+import os
 
 import numpy as np
 import triangle as tr
@@ -30,6 +38,8 @@ AREA_FACTOR = 1.5
 GRADING = 0.3
 _SQRT3_4 = np.sqrt(3.0) / 4.0
 _REFINE_PASSES = 4
+MAX_ELEMENTS = int(float(os.environ.get("JAXSQUEEZE_MAX_ELEMENTS", 2_000_000)))
+"""Largest estimated triangle count a shape function meshes (see the module docstring)."""
 
 
 # ----------------------------------------------------------------------------- shapes
@@ -57,6 +67,8 @@ def polygon(vertices, holes=(), max_edge=None, refine_near=None, refine_edge=Non
     outer = _as_ring(vertices, "outline")
     inner = [_as_ring(hole, f"hole {i}") for i, hole in enumerate(holes)]
     _check_rings(outer, inner)
+    _guard(abs(_ring_area(outer)) - sum(abs(_ring_area(v)) for v in inner),
+           sum(_perimeter(r) for r in [outer, *inner]), np.ptp(outer, axis=0).max(), h)
     rings = [_sample_polyline(outer, h)] + [_sample_polyline(v, h) for v in inner]
     return _mesh_rings(rings, [_interior_point(v) for v in inner], h)
 
@@ -88,7 +100,9 @@ def ellipse(a, b, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
     """
     h = _sizing(max_edge, **refine)
     c = _center(center)
-    ring = _sample_ellipse(c, _positive(a, "a"), _positive(b, "b"), h)
+    a, b = _positive(a, "a"), _positive(b, "b")
+    _guard(np.pi * a * b, 2 * np.pi * max(a, b), 2 * max(a, b), h)
+    ring = _sample_ellipse(c, a, b, h)
     return _mesh_rings([ring], [], h)
 
 
@@ -103,6 +117,7 @@ def annulus(r_outer, r_inner, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
         raise ValueError(f"annulus needs r_inner < r_outer; got r_inner={ri}, r_outer={ro}")
     h = _sizing(max_edge, **refine)
     c = _center(center)
+    _guard(np.pi * (ro ** 2 - ri ** 2), 2 * np.pi * (ro + ri), 2 * ro, h)
     rings = [_sample_ellipse(c, ro, ro, h), _sample_ellipse(c, ri, ri, h)]
     return _mesh_rings(rings, [c], h)
 
@@ -235,6 +250,62 @@ def _interior_point(ring) -> np.ndarray:
 # ----------------------------------------------------------------------------- sizing
 
 
+def estimate_elements(area, perimeter, h) -> float:
+    """Estimated triangle count of meshing ``area`` [m^2] (outline length ``perimeter`` [m])
+    with the sizing ``h`` of :func:`_sizing`: the area over the target triangle area at
+    ``max_edge``, plus the refined zones at ``min_edge`` (each at most the whole area), plus
+    the boundary nodes."""
+    tri_area = lambda e: AREA_FACTOR * _SQRT3_4 * e ** 2 / 1.45  # noqa: E731  (1.45: fitted to Triangle's counts)
+    n = area / tri_area(h.max_edge) + perimeter / h.min_edge
+    if h.refined:
+        reach = h.radius + (h.max_edge - h.min_edge) / GRADING
+        zone = min(area, h.count * np.pi * reach ** 2)
+        n += zone / tri_area(h.min_edge)
+    return float(n)
+
+
+def estimate(shape: str, *args, max_edge=None, center=None, holes=(), **refine) -> tuple[float, float]:
+    """(triangles, boundary nodes) that ``shapes.<shape>(*args, max_edge=..., ...)`` would make,
+    estimated without meshing (for cost guards before any work)."""
+    h = _sizing(max_edge, **refine)
+    if shape == "rectangle":
+        w, hh = _positive(args[0], "width"), _positive(args[1], "height")
+        area, per = w * hh, 2 * (w + hh)
+    elif shape in ("disk", "ellipse"):
+        a = _positive(args[0], "radius" if shape == "disk" else "a")
+        b = a if shape == "disk" else _positive(args[1], "b")
+        area, per = np.pi * a * b, 2 * np.pi * max(a, b)
+    elif shape == "annulus":
+        ro, ri = _positive(args[0], "r_outer"), _positive(args[1], "r_inner")
+        area, per = np.pi * max(ro ** 2 - ri ** 2, 0.0), 2 * np.pi * (ro + ri)
+    elif shape == "polygon":
+        rings = [np.asarray(args[0], float).reshape(-1, 2)] + [np.asarray(v, float).reshape(-1, 2) for v in holes]
+        area = abs(_ring_area(rings[0])) - sum(abs(_ring_area(v)) for v in rings[1:])
+        per = sum(_perimeter(r) for r in rings)
+    else:
+        raise ValueError(f"unknown shape {shape!r}")
+    return estimate_elements(area, per, h), per / h.min_edge
+
+
+def _guard(area, perimeter, size, h):
+    """Refuse before meshing when the estimated element count exceeds ``MAX_ELEMENTS``."""
+    n = estimate_elements(area, perimeter, h)
+    if not n <= MAX_ELEMENTS:
+        hint = ""
+        if size > 10 or h.max_edge < 1e-5 * size:
+            hint = (f" The object is {size:.3g} m across and max_edge is {h.max_edge:.3g} m: all lengths are in "
+                    "metres; if some are in millimetres, the units look mixed (divide those by 1000).")
+        raise ValueError(f"max_edge = {h.max_edge:.3g} m" + (f" (refine_edge = {h.min_edge:.3g} m)" if h.refined
+                                                              else "")
+                         + f" on an object of area {area:.3g} m^2 would make about {n:.3g} triangles, more than "
+                         f"the limit of {MAX_ELEMENTS:,} (jaxsqueeze.geometry.shapes.MAX_ELEMENTS, env "
+                         f"JAXSQUEEZE_MAX_ELEMENTS); use a larger max_edge." + hint)
+
+
+def _perimeter(ring) -> float:
+    return float(np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1).sum())
+
+
 def _sizing(max_edge, refine_near=None, refine_edge=None, refine_radius=None):
     """Target edge length h(x): (k, 2) -> (k,) [m], with attributes ``max_edge``,
     ``min_edge`` and ``refined``."""
@@ -249,6 +320,7 @@ def _sizing(max_edge, refine_near=None, refine_edge=None, refine_radius=None):
             return np.full(len(x), h_max)
 
         h.max_edge, h.min_edge, h.refined = h_max, h_max, False
+        h.radius, h.count = 0.0, 0
         return h
     near = np.asarray(refine_near, dtype=np.float64).reshape(-1, 2) if np.size(refine_near) else None
     if near is None or not np.all(np.isfinite(near)):
@@ -265,6 +337,7 @@ def _sizing(max_edge, refine_near=None, refine_edge=None, refine_radius=None):
         return np.minimum(h_max, h_min + GRADING * np.maximum(0.0, d - radius))
 
     h.max_edge, h.min_edge, h.refined = h_max, h_min, True
+    h.radius, h.count = radius, len(near)
     return h
 
 

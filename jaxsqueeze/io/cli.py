@@ -25,7 +25,11 @@ outputs (in DIR):
   final.vtu           ParaView file of the final state
 
 exit status: 0 the squeeze reached its depth, 1 it ended otherwise (e.g. SLIP_FAILURE;
-outputs are still written), 2 bad command line or scene file (nothing is written).
+outputs are still written), 2 bad command line or scene file (nothing is written),
+3 internal error (the full traceback is written to a file named in the message),
+130 interrupted (Ctrl-C or SIGTERM; the previous outputs, if any, are left as they were).
+Outputs are written into a temporary folder beside DIR and moved in place at the end.
+See docs/errors.md for every status and exit code.
 The scene file format is described in jaxsqueeze.scenefile (python -m pydoc jaxsqueeze.scenefile).
 """
 
@@ -93,12 +97,77 @@ def demo_scene_text() -> str:
 
 
 def _error(msg: str) -> int:
-    print(f"error: {msg}", file=sys.stderr)
+    """Exit 2: one ``error: ...`` line per problem (a scene file lists all of its problems)."""
+    lines = [ln for ln in str(msg).splitlines() if ln.strip()] or ["invalid input"]
+    if lines[0].startswith("invalid input:"):
+        lines = lines[1:] or lines
+    for ln in lines:
+        print(f"error: {ln.strip()}", file=sys.stderr)
     return 2
 
 
+class _Interrupted(BaseException):
+    """SIGTERM, turned into an exception so the temporary output folder is cleaned up."""
+
+
+def _on_sigterm(signum, frame):  # pragma: no cover - exercised in a subprocess test
+    raise _Interrupted()
+
+
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    """Run the command line; returns the exit status (never raises for anything a scene file
+    can cause: see the exit statuses in ``jaxsqueeze --help``)."""
+    import signal
+    import threading
+
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGTERM, _on_sigterm)
+    scene_path = None
+    try:
+        args = _parser().parse_args(argv)
+        scene_path = getattr(args, "scene", None) or "<demo scene>"
+        return _main(args)
+    except (KeyboardInterrupt, _Interrupted):
+        print("jaxsqueeze: interrupted; no new outputs were written", file=sys.stderr)
+        return 130
+    except ValueError as e:                       # the library's word on bad input
+        return _error(str(e))
+    except Exception as e:  # noqa: BLE001 - exit 3 with a pointer to the traceback
+        import tempfile
+        import traceback
+
+        fd, tb_path = tempfile.mkstemp(prefix="jaxsqueeze-traceback-", suffix=".txt")
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(f"jaxsqueeze {' '.join(sys.argv[1:] if argv is None else map(str, argv))}\n"
+                     f"scene: {scene_path}\n\n")
+            traceback.print_exc(file=fh)
+        print(f"jaxsqueeze: internal error ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}) "
+              f"while running {scene_path}; the full traceback is in {tb_path} (please report it)",
+              file=sys.stderr)
+        return 3
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+
+
+def _check_out(out: str) -> None:
+    """``--out`` must be a folder we can create or replace: checked before any work."""
+    from .scenefile import SceneFileError
+
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise SceneFileError("--out", f"{out} exists and is not a folder")
+    parent = os.path.dirname(out)
+    probe = parent
+    while probe and not os.path.exists(probe):
+        probe = os.path.dirname(probe)
+    if probe and not os.path.isdir(probe):
+        raise SceneFileError("--out", f"{out} is below {probe}, which is a file, not a folder")
+    if not os.access(probe or ".", os.W_OK | os.X_OK):
+        raise SceneFileError("--out", f"cannot write into {probe}: permission denied")
+
+
+def _main(args) -> int:
     if args.command == "demo" and args.print_scene:
         sys.stdout.write(demo_scene_text())
         return 0
@@ -106,26 +175,25 @@ def main(argv=None) -> int:
 
     from . import scenefile
 
-    # ---- read and validate everything before touching the output folder or JAX
-    progress.start("meshing", "reading the scene and meshing")
-    try:
-        for opt in ("max_edge", "refine_edge"):
-            v = getattr(args, opt)
-            if v is not None and not (0 < v < float("inf")):
-                raise scenefile.SceneFileError("--" + opt.replace("_", "-"), f"expected a length > 0 m, got {v}")
-        sizes = dict(max_edge=args.max_edge, refine_edge=args.refine_edge)
-        if args.command == "demo":
-            from importlib import resources
-
-            with resources.as_file(resources.files("jaxsqueeze").joinpath("scenes/foam_square.toml")) as path:
-                spec = scenefile.load(path, **sizes)
-        else:
-            spec = scenefile.load(args.scene, **sizes)
-    except scenefile.SceneFileError as e:
-        return _error(str(e))
+    # ---- read and validate everything (and the output folder) before any work
     out = os.path.abspath(args.out)
-    if os.path.exists(out) and not os.path.isdir(out):
-        return _error(f"--out: {out} exists and is not a folder")
+    _check_out(out)
+    progress.start("meshing", "reading the scene and meshing")
+    for opt in ("max_edge", "refine_edge"):
+        v = getattr(args, opt)
+        if v is not None and not (0 < v < float("inf")):
+            raise scenefile.SceneFileError("--" + opt.replace("_", "-"), f"expected a length > 0 m, got {v}")
+    sizes = dict(max_edge=args.max_edge, refine_edge=args.refine_edge)
+    if args.command == "demo":
+        from importlib import resources
+
+        with resources.as_file(resources.files("jaxsqueeze").joinpath("scenes/foam_square.toml")) as path:
+            spec = scenefile.load(path, **sizes)
+    else:
+        spec = scenefile.load(args.scene, **sizes)
+    if not args.quiet:
+        for w in spec.warnings:
+            print(f"warning: {w}", file=sys.stderr)
 
     # ---- precision: before the first JAX array
     import jax
@@ -134,7 +202,42 @@ def main(argv=None) -> int:
     return _simulate(spec, out, args, progress)
 
 
+def _json_safe(x):
+    """JSON-ready copy: numpy scalars/arrays to Python, NaN and infinities to None."""
+    import math
+
+    import numpy as np
+
+    if isinstance(x, dict):
+        return {str(k): _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _json_safe(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _publish(tmp: str, out: str) -> None:
+    """Move the finished temporary folder to ``out``, replacing an old one whole."""
+    import shutil
+
+    old = None
+    if os.path.isdir(out):
+        old = tmp + ".old"
+        os.rename(out, old)
+    os.rename(tmp, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 def _simulate(spec, out, args, progress) -> int:
+    import shutil
+    import tempfile
+
     import numpy as np
 
     from ..post import export
@@ -150,26 +253,35 @@ def _simulate(spec, out, args, progress) -> int:
     res = squeeze(scene)
     progress.done()
 
-    os.makedirs(out, exist_ok=True)
-    paths = {}
-    if not args.no_plots:
-        progress.start("plots", "plotting")
-        from ..post import plots
+    parent = os.path.dirname(out)
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)}.tmp-", dir=parent)
+    try:
+        paths = {}
+        if not args.no_plots:
+            progress.start("plots", "plotting")
+            from ..post import plots
 
-        paths.update({f"{k}_png": v for k, v in plots.save_all(res, scene, out).items()})
-    progress.start("export", "writing ParaView files")
-    paths["xdmf"] = export.write_paraview(out, res, scene.mesh, op=op)
-    paths["vtu"] = export.write_final_vtu(os.path.join(out, "final.vtu"), res, scene.mesh)
-    progress.done()
-    progress.timings["total"] = time.perf_counter() - progress.t0
+            paths.update({f"{k}_png": v for k, v in plots.save_all(res, scene, tmp).items()})
+        progress.start("export", "writing ParaView files")
+        paths["xdmf"] = export.write_paraview(tmp, res, scene.mesh, op=op)
+        paths["vtu"] = export.write_final_vtu(os.path.join(tmp, "final.vtu"), res, scene.mesh)
+        progress.done()
+        progress.timings["total"] = time.perf_counter() - progress.t0
 
-    summ = views.summary(res, scene, progress.timings)
-    summ = dict(title=spec.title, scene_file=spec.path, precision=spec.precision, **summ)
-    paths["summary"] = os.path.join(out, "summary.json")
-    summ["outputs"] = {k: os.path.basename(v) for k, v in paths.items()}
-    with open(paths["summary"], "w", encoding="utf-8") as fh:
-        json.dump(summ, fh, indent=2)
-        fh.write("\n")
+        summ = views.summary(res, scene, progress.timings)
+        summ = dict(title=spec.title, scene_file=spec.path, precision=spec.precision, **summ)
+        if spec.warnings:
+            summ["warnings"] = list(spec.warnings)
+        paths["summary"] = os.path.join(tmp, "summary.json")
+        summ["outputs"] = {k: os.path.basename(v) for k, v in paths.items()}
+        with open(paths["summary"], "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(_json_safe(summ), indent=2, allow_nan=False))
+            fh.write("\n")
+        _publish(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     if not args.quiet:
         print(_report(summ, res, out, np))
     return 0 if res.outcome == Status.SUCCESS else 1

@@ -139,6 +139,7 @@ class SceneSpec:
     title: str
     path: str
     data: dict
+    warnings: tuple = ()
 
 
 # ----------------------------------------------------------------------------- value checks
@@ -213,11 +214,22 @@ def _wrap(err: ValueError, default: str, names: dict) -> SceneFileError:
 # ----------------------------------------------------------------------------- loading
 def read(path) -> dict:
     """Parse a TOML file; syntax errors become ``SceneFileError("file", ...)``."""
+    if os.path.isdir(path):
+        raise SceneFileError("file", f"{path} is a folder, not a scene file")
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            raw = fh.read()
     except FileNotFoundError:
         raise SceneFileError("file", f"no such scene file: {path}") from None
+    except OSError as e:
+        raise SceneFileError("file", f"cannot read {path}: {e.strerror or e}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SceneFileError("file", f"{path} is not UTF-8 text (byte {e.start}: {raw[e.start:e.start + 1]!r}); "
+                             "a scene file is a TOML text file saved as UTF-8") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise SceneFileError("file", f"{path} is not valid TOML: {e}") from None
 
@@ -248,55 +260,248 @@ def load_text(text: str, base: str = ".", max_edge: float | None = None,
     return from_dict(data, base=base, path="<string>", max_edge=max_edge, refine_edge=refine_edge)
 
 
+class _Collector:
+    """Collects :class:`SceneFileError` s so a file with several problems lists them all."""
+
+    def __init__(self):
+        self.errors: list[SceneFileError] = []
+
+    def add(self, err: SceneFileError):
+        if not any(e.key == err.key and e.message == err.message for e in self.errors):
+            self.errors.append(err)
+
+    def run(self, fn, *args, **kw):
+        """``fn(*args, **kw)``, or ``_BAD`` after recording its SceneFileError."""
+        try:
+            return fn(*args, **kw)
+        except SceneFileError as e:
+            self.add(e)
+            return _BAD
+        except KeyError:          # a required key that is missing: already reported as such
+            return _BAD
+
+    def raise_if_any(self):
+        if len(self.errors) == 1:
+            raise self.errors[0]
+        if self.errors:
+            raise SceneErrors(self.errors)
+
+
+class SceneErrors(SceneFileError):
+    """Several problems in one scene file; ``errors`` lists them (``key`` is the first's)."""
+
+    def __init__(self, errors):
+        self.errors = list(errors)
+        first = self.errors[0]
+        super().__init__(first.key, first.message)
+        self.args = ("\n".join(str(e) for e in self.errors),)
+
+    def __str__(self):
+        return self.args[0]
+
+
+_BAD = object()
+
+
+def _bad(*values) -> bool:
+    return any(v is _BAD for v in values)
+
+
+# scene-file key of each validate.FIELDS entry (depth and grip depend on how they were given)
+_FIELD_KEYS = {"material.E": "material.E", "material.nu": "material.nu", "material.thickness": "material.thickness",
+               "fingers.radius": "fingers.radius", "friction": "squeeze.friction",
+               "settings.step": "accuracy.step", "settings.event_tol": "accuracy.event_tol",
+               "settings.newton_tol": "accuracy.newton_tol", "settings.gap_tol": "accuracy.gap_tol",
+               "fingers.rotation": "fingers.rotation"}
+
+
 def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float | None = None,
               refine_edge: float | None = None) -> SceneSpec:
-    """Build a :class:`SceneSpec` from parsed TOML data."""
+    """Build a :class:`SceneSpec` from parsed TOML data.
+
+    Every independent problem is collected: a file with several problems raises one
+    :class:`SceneErrors` (a :class:`SceneFileError`) that lists them all, like a compiler.
+    """
     from ..mechanics.material import Material
+    from ..simulation import validate
     from ..simulation.scene import Fingers, Scene, Settings
 
-    _unknown("", data, set(TABLES) | set(TOP_KEYS))
+    errs = _Collector()
+    warnings: list[str] = []
+    errs.run(_unknown, "", data, set(TABLES) | set(TOP_KEYS))
     for t in REQUIRED_TABLES:
         if t not in data:
-            raise SceneFileError(t, f"missing table [{t}]")
+            errs.add(SceneFileError(t, f"missing table [{t}]"))
+    tables = {}
     for t in TABLES:
         if t in data:
-            _table(t, data[t])
+            tables[t] = errs.run(_table, t, data[t])
+    tables.setdefault("accuracy", {})
+    have = lambda t: isinstance(tables.get(t), dict)  # noqa: E731
     title = data.get("title", os.path.splitext(os.path.basename(path))[0])
     if not isinstance(title, str):
-        raise SceneFileError("title", f"expected a string, got {_describe(title)}")
-    is_band = isinstance(data["object"], dict) and "band" in data["object"]
+        errs.add(SceneFileError("title", f"expected a string, got {_describe(title)}"))
+    is_band = have("object") and "band" in tables["object"]
     for t, keys in TABLES.items():
-        if keys is None or t not in data:
+        if keys is None or not have(t):
             continue
-        _unknown(t, data[t], set(keys))
+        errs.run(_unknown, t, tables[t], set(keys))
         for k, required in keys.items():
             if is_band and t == "material" and k in ("nu", "thickness"):
                 continue                      # a band has no nu; its height may come from [object]
-            if required and k not in data[t]:
-                raise SceneFileError(f"{t}.{k}", "missing (required)")
-    if ("depth" in data["squeeze"]) == ("relative_depth" in data["squeeze"]):
-        raise SceneFileError("squeeze.depth", "give exactly one of squeeze.depth [m] or squeeze.relative_depth")
+            if required and k not in tables[t]:
+                errs.add(SceneFileError(f"{t}.{k}", "missing (required)"))
+    sq = tables["squeeze"] if have("squeeze") else None
+    if sq is not None and ("depth" in sq) == ("relative_depth" in sq):
+        errs.add(SceneFileError("squeeze.depth", "give exactly one of squeeze.depth [m] or squeeze.relative_depth"))
 
     # accuracy (first: it holds the precision)
-    acc = data.get("accuracy", {})
-    precision = _choice("accuracy.precision", acc.get("precision", "float64"), PRECISIONS)
+    acc = tables["accuracy"] if have("accuracy") else {}
+    precision = errs.run(_choice, "accuracy.precision", acc.get("precision", "float64"), PRECISIONS)
     settings = {}
     for k in ("step", "event_tol", "newton_tol", "gap_tol"):
         if k in acc:
-            settings[k] = _number(f"accuracy.{k}", acc[k], positive=True)
+            settings[k] = errs.run(_number, f"accuracy.{k}", acc[k], positive=True)
     for k in ("capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
         if k in acc:
-            settings[k] = _number(f"accuracy.{k}", acc[k], integer=True)
-    if settings.get("capacity", 2) < 2:
-        raise SceneFileError("accuracy.capacity", "expected at least 2 (one contact per finger)")
+            settings[k] = errs.run(_number, f"accuracy.{k}", acc[k], integer=True)
+    if not _bad(settings.get("capacity")) and settings.get("capacity", 2) < 2:
+        errs.add(SceneFileError("accuracy.capacity", "expected at least 2 (one contact per finger)"))
+    settings_ok = not _bad(*settings.values())
+    dtype = np.float32 if precision == "float32" else np.float64
 
     # material
-    mat_t = data["material"]
+    material = errs.run(_material, tables["material"], tables.get("object") if have("object") else {},
+                                is_band) if have("material") else _BAD
+    band_height = material.thickness if is_band and not _bad(material) else None
+
+    # fingers
+    fingers = errs.run(_fingers, tables["fingers"]) if have("fingers") else _BAD
+
+    # grip (points are needed for refinement)
+    grip_points = grip_nodes = _BAD
+    if have("grip"):
+        grip_t = tables["grip"]
+        if ("nodes" in grip_t) == ("points" in grip_t):
+            errs.add(SceneFileError("grip", "give exactly one of grip.nodes = [i, j] or grip.points = "
+                                    "[[x1, y1], [x2, y2]]"))
+        elif "points" in grip_t:
+            grip_points, grip_nodes = errs.run(_points, "grip.points", grip_t["points"], count=2), None
+        else:
+            g = grip_t["nodes"]
+            if not (isinstance(g, list) and len(g) == 2 and all(isinstance(v, int) and not isinstance(v, bool)
+                                                                 for v in g)):
+                errs.add(SceneFileError("grip.nodes", f"expected two integer mesh node indices [i, j], got "
+                                        f"{_describe(g)}"))
+            else:
+                grip_nodes, grip_points = g, None
+
+    # cheap numbers of [squeeze] before meshing
+    friction = fmodel = contact = method = depth_given = rho = _BAD
+    if sq is not None:
+        friction = errs.run(_number, "squeeze.friction", sq.get("friction", 0.5))
+        fmodel = errs.run(_choice, "squeeze.friction_model", sq.get("friction_model", "coulomb"),
+                          ("coulomb", "frictionless", "stick"))
+        contact = errs.run(_choice, "squeeze.contact", sq.get("contact", "point" if is_band else "segment"),
+                           ("segment", "point"))
+        method = errs.run(_choice, "squeeze.method", sq.get("method", "sparse"), METHODS)
+        if "relative_depth" in sq and "depth" not in sq:
+            rho = errs.run(_number, "squeeze.relative_depth", sq["relative_depth"], positive=True)
+            if not _bad(rho) and rho >= 1:
+                errs.add(SceneFileError("squeeze.relative_depth",
+                                        f"expected a fraction 0 < rho < 1 of the grip distance, got {rho}"))
+                rho = _BAD
+            depth_given = None
+        elif "depth" in sq:
+            depth_given = errs.run(_number, "squeeze.depth", sq["depth"])
+    dkey = "squeeze.relative_depth" if sq is not None and "relative_depth" in sq else "squeeze.depth"
+
+    # mesh, after guarding its cost (element count, compliance, history memory) before any work
+    mesh = _BAD
+    if have("object") and not _bad(grip_points, grip_nodes):
+        if is_band:
+            if not _bad(material):
+                mesh = errs.run(_band, tables["object"], band_height, (max_edge, refine_edge))
+        else:
+            est = errs.run(_estimate, tables["object"], (max_edge, refine_edge), grip_points)
+            if est is not None and not _bad(est):
+                size, n_tri, m_est = est
+                if not _bad(fingers, depth_given, material):
+                    uerr, uwarn = validate.unit_problems(
+                        size=size, radius=float(fingers.radius), E=float(material.E),
+                        depth=depth_given if depth_given else None)
+                    for msg in uerr:
+                        errs.add(SceneFileError(dkey, msg))
+                    warnings.extend(uwarn)
+                if settings_ok and not _bad(method):
+                    s0 = Settings(**settings)
+                    for msg in validate.check_costs(int(m_est), int(n_tri / 2 + m_est), method, s0.capacity,
+                                                    s0.max_steps, s0.max_events, dtype):
+                        errs.add(SceneFileError(_cost_key(msg), msg + " (estimated before meshing)"))
+            if not errs.errors:
+                mesh = errs.run(_object, tables["object"], base, grip_points, (max_edge, refine_edge))
+    errs.raise_if_any()                                   # everything below needs all of the above
+
+    # grip → nodes
+    from ..simulation.scene import nearest_boundary_node
+    if grip_points is not None:
+        grip = tuple(nearest_boundary_node(mesh, p) for p in grip_points)
+        gkey = "grip.points"
+        _check_grip_points(errs, mesh, grip_points, grip)
+        if grip[0] == grip[1]:
+            errs.add(SceneFileError("grip.points", f"both points are nearest to the same boundary node {grip[0]}"))
+    else:
+        bad = [v for v in grip_nodes if not 0 <= v < mesh.n]
+        if bad:
+            errs.add(SceneFileError("grip.nodes", f"node(s) {bad} do not exist: the mesh has nodes 0..{mesh.n - 1}"))
+        grip, gkey = tuple(grip_nodes), "grip.nodes"
+    errs.raise_if_any()
+    if rho is not None and depth_given is None:
+        depth = rho * _grip_distance(mesh, grip)
+    else:
+        depth = depth_given
+    scene = None
+    try:
+        scene = Scene(mesh=mesh, material=material, fingers=fingers, grip=grip, friction=friction, depth=depth,
+                      friction_model=fmodel, contact=contact, method=method, settings=Settings(**settings))
+    except ValueError as e:
+        m = re.search(r"Settings\.(\w+)", str(e))
+        if m:
+            errs.add(SceneFileError(f"accuracy.{m.group(1)}", str(e)))
+        else:
+            errs.add(_wrap(e, "squeeze", {r"^friction=": "squeeze.friction", r"^depth=": dkey,
+                                          r"^friction_model=": "squeeze.friction_model",
+                                          r"^contact=": "squeeze.contact", r"^grip": gkey}))
+    errs.raise_if_any()
+
+    # one validation layer (the same rules as the engine's traced twin), in the run's precision
+    keys = dict(_FIELD_KEYS, depth=dkey, grip=gkey, **{"grip.overlap": gkey})
+    vals = validate.values_of(scene, eps=float(np.finfo(dtype).eps))
+    for line in validate.problems(vals):
+        field = line.split(" = ", 1)[0]
+        errs.add(SceneFileError(keys.get(field, field), line))
+    for msg in validate.scene_cost_problems(scene, dtype):
+        errs.add(SceneFileError(_cost_key(msg), msg))
+    if not errs.errors:
+        errs.run(_check_cones, scene, gkey, precision)
+    errs.raise_if_any()
+    return SceneSpec(scene=scene, precision=precision, title=title, path=str(path), data=data,
+                     warnings=tuple(warnings))
+
+
+def _cost_key(msg: str) -> str:
+    for k in ("capacity", "max_steps", "max_events"):
+        if msg.startswith(f"settings.{k}"):
+            return f"accuracy.{k}"
+    return "object"
+
+
+def _material(mat_t, obj_t, is_band):
+    from ..mechanics.material import Material
+
     E = _number("material.E", mat_t["E"])
     nu = _number("material.nu", mat_t.get("nu", 0.3))         # a band ignores nu
-    band_height = None
     if is_band:
-        obj_t = data["object"]
         band_height = _number("object.height", obj_t["height"], positive=True) if "height" in obj_t else None
         if "thickness" in mat_t:
             th = _number("material.thickness", mat_t["thickness"])
@@ -304,18 +509,19 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
                 raise SceneFileError("material.thickness", f"{th} m differs from object.height = {band_height} m; "
                                      "for a band both are its height out of the plane (give one of them)")
             band_height = th if band_height is None else band_height
-        band_height = 5e-3 if band_height is None else band_height
-        th = band_height
+        th = 5e-3 if band_height is None else band_height
     else:
         th = _number("material.thickness", mat_t["thickness"])
     try:
-        material = Material(E=E, nu=nu, thickness=th)
+        return Material(E=E, nu=nu, thickness=th)
     except ValueError as e:
         raise _wrap(e, "material", {r"Material\.E\b": "material.E", r"Material\.nu\b": "material.nu",
                                     r"Material\.thickness\b": "material.thickness"}) from None
 
-    # fingers
-    fin = data["fingers"]
+
+def _fingers(fin):
+    from ..simulation.scene import Fingers
+
     radius = _number("fingers.radius", fin["radius"], positive=True)
     rotation = None
     if "rotation" in fin:
@@ -326,68 +532,28 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
                                  "polynomial coefficients [[...], [...]] (one per finger, highest power first)")
         rotation = np.array([[_number(f"fingers.rotation[{i}]", c) for c in r] for i, r in enumerate(rot)])
     try:
-        fingers = Fingers(radius=radius, rotation=rotation)
+        return Fingers(radius=radius, rotation=rotation)
     except ValueError as e:
         raise _wrap(e, "fingers", {"radius": "fingers.radius", "rotation": "fingers.rotation"}) from None
 
-    # grip (points are needed for refinement)
-    grip_t = data["grip"]
-    if ("nodes" in grip_t) == ("points" in grip_t):
-        raise SceneFileError("grip", "give exactly one of grip.nodes = [i, j] or grip.points = [[x1, y1], [x2, y2]]")
-    grip_points = _points("grip.points", grip_t["points"], count=2) if "points" in grip_t else None
-    grip_nodes = None
-    if "nodes" in grip_t:
-        g = grip_t["nodes"]
-        if not (isinstance(g, list) and len(g) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in g)):
-            raise SceneFileError("grip.nodes", f"expected two integer mesh node indices [i, j], got {_describe(g)}")
-        grip_nodes = g
 
-    if is_band:
-        mesh = _band(data["object"], band_height, (max_edge, refine_edge))
-    else:
-        mesh = _object(data["object"], base, grip_points, (max_edge, refine_edge))
-
-    # grip → nodes
-    from ..simulation.scene import nearest_boundary_node
-    if grip_points is not None:
-        grip = tuple(nearest_boundary_node(mesh, p) for p in grip_points)
-        if grip[0] == grip[1]:
-            raise SceneFileError("grip.points", f"both points are nearest to the same boundary node {grip[0]}")
-        gkey = "grip.points"
-    else:
-        bad = [v for v in grip_nodes if not 0 <= v < mesh.n]
-        if bad:
-            raise SceneFileError("grip.nodes", f"node(s) {bad} do not exist: the mesh has nodes 0..{mesh.n - 1}")
-        grip, gkey = tuple(grip_nodes), "grip.nodes"
-
-    # squeeze
-    sq = data["squeeze"]
-    if "relative_depth" in sq:
-        rho = _number("squeeze.relative_depth", sq["relative_depth"], positive=True)
-        if rho >= 1:
-            raise SceneFileError("squeeze.relative_depth", f"expected a fraction 0 < rho < 1 of the grip distance, got {rho}")
-        dkey, depth = "squeeze.relative_depth", rho * _grip_distance(mesh, grip)
-    else:
-        dkey, depth = "squeeze.depth", _number("squeeze.depth", sq["depth"])
-    friction = _number("squeeze.friction", sq.get("friction", 0.5))
-    fmodel = _choice("squeeze.friction_model", sq.get("friction_model", "coulomb"), ("coulomb", "frictionless", "stick"))
-    contact = _choice("squeeze.contact", sq.get("contact", "point" if is_band else "segment"), ("segment", "point"))
-    method = _choice("squeeze.method", sq.get("method", "sparse"), METHODS)
-    try:
-        scene = Scene(mesh=mesh, material=material, fingers=fingers, grip=grip, friction=friction, depth=depth,
-                      friction_model=fmodel, contact=contact, method=method, settings=Settings(**settings))
-    except ValueError as e:
-        m = re.search(r"Settings\.(\w+)", str(e))
-        if m:
-            raise SceneFileError(f"accuracy.{m.group(1)}", str(e)) from None
-        raise _wrap(e, "squeeze", {r"^friction=": "squeeze.friction", r"^depth=": dkey,
-                                   r"^friction_model=": "squeeze.friction_model",
-                                   r"^contact=": "squeeze.contact", r"^grip": gkey}) from None
-    _check_cones(scene, gkey)
-    if depth >= _grip_distance(mesh, grip):
-        raise SceneFileError(dkey, f"depth {depth} m is not smaller than the distance between the grip "
-                             f"nodes ({_grip_distance(mesh, grip):.6g} m)")
-    return SceneSpec(scene=scene, precision=precision, title=title, path=str(path), data=data)
+def _check_grip_points(errs, mesh, points, grip):
+    """A grip point must lie within twice the boundary edges next to the boundary node it
+    snaps to (not 50 m off the object, not at its centre)."""
+    P = np.asarray(mesh.points) + np.asarray(mesh.offset)
+    b = np.asarray(mesh.boundary) if hasattr(mesh, "loops") and hasattr(mesh, "triangles") else np.arange(len(P))
+    loops = np.split(b, np.cumsum(mesh.loops)[:-1]) if hasattr(mesh, "loops") else [b]
+    nxt = np.concatenate([np.roll(lp, -1) for lp in loops])
+    prv = np.concatenate([np.roll(lp, 1) for lp in loops])
+    where = {int(v): k for k, v in enumerate(b)}
+    for k, (xy, node) in enumerate(zip(points, grip)):
+        i = where[int(node)]
+        h = max(np.linalg.norm(P[nxt[i]] - P[node]), np.linalg.norm(P[prv[i]] - P[node]))
+        d = float(np.linalg.norm(P[node] - xy))
+        if d > 2 * h:
+            errs.add(SceneFileError("grip.points", f"point {k + 1} {list(map(float, xy))} is {d:.3g} m from the "
+                                    f"nearest boundary node {node} at {P[node].tolist()}, more than twice the "
+                                    f"boundary edges there ({h:.3g} m): put the grip points on the object's outline"))
 
 
 def _grip_distance(mesh, grip) -> float:
@@ -395,23 +561,41 @@ def _grip_distance(mesh, grip) -> float:
     return float(np.linalg.norm(P[grip[0]] - P[grip[1]]))
 
 
-def _check_cones(scene, key):
-    """The segment between the grip nodes must lie in both friction cones (numpy twin of
-    ``grasp.check_grip``, so no JAX array is created while loading)."""
+def _check_cones(scene, key, precision: str = "float64"):
+    """The segment between the grip nodes must lie in both friction cones.
+
+    One cone test (:func:`jaxsqueeze.simulation.laws.grip_feasible`, with numpy so no JAX
+    array is created while loading), in one precision rule: the precision of the run, on the
+    same scaled positions and normals the engine's operator holds (points / L). So a grip the
+    squeeze would refuse in float32 is refused here, before any work.
+    """
+    from ..simulation.laws import grip_cone_angles
+
+    if scene.friction_model == "stick":          # full stick: the cones are half-planes
+        return
+    dt = np.float32 if precision == "float32" else np.float64
     mesh = scene.mesh
-    pos = {int(v): k for k, v in enumerate(np.asarray(mesh.boundary))}
+    pos = {int(v): k for k, v in enumerate(np.asarray(scene.boundary_nodes()))}
     i, j = (int(v) for v in scene.grip)
     P, N = np.asarray(mesh.points), np.asarray(mesh.normals)
-    seg = P[j] - P[i]
-    seg = seg / np.linalg.norm(seg)
-    ang = np.degrees(np.arccos(np.clip([-N[pos[i]] @ seg, N[pos[j]] @ seg], -1, 1)))
-    half = np.degrees(np.arctan(float(scene.friction))) if scene.friction_model == "coulomb" else 0.0
-    if np.any(ang > half + np.degrees(CONE_SLACK)):
+    L = float(np.max(np.ptp(P, axis=0)))
+    Pb = (P[list(scene.boundary_nodes())] / L).astype(dt) if hasattr(mesh, "triangles") else (P / L).astype(dt)
+    Nb = N.astype(dt)
+    p = np.stack([Pb[pos[i]], Pb[pos[j]]])
+    inward = -np.stack([Nb[pos[i]], Nb[pos[j]]])
+    ang = np.degrees(grip_cone_angles(p, inward, xp=np).astype(np.float64))
+    phi = float(np.arctan(float(scene.friction))) if scene.friction_model == "coulomb" else 0.0
+    if np.any(ang > np.degrees(phi + CONE_SLACK)):
+        hint = ""
+        if dt == np.float32 and np.all(ang <= np.degrees(phi) + 0.05):
+            hint = (" The angles are within float32 round-off of the cone: with precision = \"float32\" this "
+                    "grip cannot be told apart from one outside it; use accuracy.precision = \"float64\" or some "
+                    "friction")
         raise SceneFileError(key, (
             f"grip nodes ({i}, {j}): the segment between them makes {ang[0]:.3g}° and {ang[1]:.3g}° with the "
-            f"inward normals, but the friction cones only allow {half:.3g}° (squeeze.friction = "
-            f"{float(scene.friction):.3g}, friction_model = {scene.friction_model!r}); choose more nearly "
-            "opposite grip points or more friction"))
+            f"inward normals, but the friction cones only allow {np.degrees(phi):.3g}° (squeeze.friction = "
+            f"{float(scene.friction):.3g}, friction_model = {scene.friction_model!r}, precision {precision}); "
+            "choose more nearly opposite grip points or more friction." + hint))
 
 
 def _band(obj, height, overrides=(None, None)):
@@ -470,6 +654,15 @@ def _object(obj, base, grip_points, overrides=(None, None)):
         except Exception as e:  # meshio's own read errors (unknown format, corrupt file)
             raise SceneFileError("object.mesh_file", f"cannot read {path}: {type(e).__name__}: {e}") from None
 
+    shape, args, kw, names = _shape_args(obj, grip_points, overrides)
+    try:
+        return getattr(shapes, shape)(*args, **kw)
+    except ValueError as e:
+        raise _wrap(e, "object", names) from None
+
+
+def _shape_args(obj, grip_points, overrides=(None, None)):
+    """(shape, args, kwargs, error-key names) of the ``shapes`` call an ``[object]`` table asks for."""
     shape = _choice("object.shape", obj["shape"], tuple(SHAPES))
     req, opt = SHAPES[shape], SHAPE_OPTIONAL[shape]
     _unknown("object", obj, {"shape", *req, *opt, *MESH_KEYS})
@@ -515,7 +708,35 @@ def _object(obj, base, grip_points, overrides=(None, None)):
              r"refine_near": "grip.points", r"max_edge": "object.max_edge", r"center": "object.center",
              r"^hole|holes|hole \d": "object.holes", r"outline|vertices|polygon": "object.vertices"}
     names.update({rf"\b{k}\b": f"object.{k}" for k in req})
+    return shape, args, kw, names
+
+
+def _estimate(obj, overrides, grip_points):
+    """(object size [m], triangles, boundary nodes) estimated before meshing; None for a mesh file."""
+    from ..geometry import shapes
+
+    obj = _table("object", obj)
+    if "shape" not in obj or "mesh_file" in obj:
+        return None
+    shape, args, kw, names = _shape_args(obj, grip_points, overrides)
+    if shape == "polygon":
+        size = float(np.ptp(args[0], axis=0).max())
+    elif shape == "rectangle":
+        size = max(args)
+    else:
+        size = 2 * max(args)
+    kw = {k: v for k, v in kw.items() if k != "center"}
     try:
-        return getattr(shapes, shape)(*args, **kw)
+        n_tri, m_est = shapes.estimate(shape, *args, **kw)
     except ValueError as e:
         raise _wrap(e, "object", names) from None
+    if not n_tri <= shapes.MAX_ELEMENTS:
+        hint = ""
+        if size > 10 or kw["max_edge"] < 1e-5 * size:
+            hint = (f" The object is {size:.3g} m across: every length is in metres; if some are in millimetres "
+                    "the units look mixed (divide those by 1000).")
+        raise SceneFileError("object.max_edge", f"max_edge = {kw['max_edge']:.3g} m would make about {n_tri:.3g} "
+                             f"triangles on this {shape}, more than the limit of {shapes.MAX_ELEMENTS:,} "
+                             "(jaxsqueeze.geometry.shapes.MAX_ELEMENTS, env JAXSQUEEZE_MAX_ELEMENTS); use a larger "
+                             "max_edge (or --max-edge)." + hint)
+    return size, n_tri, m_est

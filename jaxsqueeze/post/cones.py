@@ -202,6 +202,7 @@ def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) ->
     Returns:
         :class:`ConeAxes`.
     """
+    res = views.trimmed(res)
     if axis not in AXES:
         raise ValueError(f"axis={axis!r}; choose one of {AXES}")
     geo, op, E, mu = _unpack(obj)
@@ -276,6 +277,7 @@ def grasp_stability(res, obj, axis: str = "surface", friction: float | None = No
     if it shrank by more than ``tol``, else "neutral". Each finger's own label follows the sign
     of its final ``toward`` rotation. See :func:`cone_axes` for the arguments.
     """
+    res = views.trimmed(res)
     c = cone_axes(res, obj, axis=axis, friction=friction)
     if np.all(np.isnan(c.margin)):
         raise ValueError("grasp_stability needs the friction coefficient: pass the Scene or friction=")
@@ -300,71 +302,15 @@ def grasp_stability(res, obj, axis: str = "surface", friction: float | None = No
 
 
 def plot_cone_rotation(res, obj, axis: str = "surface", friction: float | None = None):
-    """Fig. 3 analogue: the cones at the start and at the end, their rotation toward the
-    other finger and the cone margins against the relative depth.
+    """Kept importable here; the plot lives in :func:`jaxsqueeze.post.plots.plot_cone_rotation`
+    (imported on call, so cones does not import plots at import time: no cycle)."""
+    from . import plots
 
-    Left: the deformed object near the two contacts with the friction cones (initial:
-    dashed, final: solid) and the force directions. Middle: ``toward`` [deg] per finger.
-    Right: cone margin [deg] per finger (0 = on the cone edge: slip). Returns a Figure.
-    """
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Circle
+    return plots.plot_cone_rotation(res, obj, axis=axis, friction=friction)
 
-    from .plots import DPI, FINGER_COLORS, MM
 
-    st = grasp_stability(res, obj, axis=axis, friction=friction)
-    c = st.cones
-    geo, op, _, mu = _unpack(obj)
-    mu = float(friction) if friction is not None else mu
-    P, loops = _geometry(geo, op)
-    off = np.asarray(getattr(geo, "offset", np.zeros(2)), float)
-    fig = Figure(figsize=(14, 4.6), dpi=DPI, layout="constrained")
-    a0, a1, a2 = fig.subplots(1, 3, width_ratios=[1.2, 1, 1])
-    # --- geometry with cones
-    U = np.asarray(res.boundary_displacement, float)
-    start = 0
-    for n in loops:
-        for r, style in ((0, "--"), (-1, "-")):
-            q = P[start:start + n] + U[r, start:start + n] + off
-            q = np.vstack([q, q[:1]]) * MM
-            a0.plot(q[:, 0], q[:, 1], style, color="0.5" if r == 0 else "0.15", lw=1.0)
-        start += n
-    half = np.arctan(mu)
-    size = 0.12 * float(np.max(np.ptp(P, axis=0)))
-    for f in (0, 1):
-        for r, style, alpha in ((0, "--", 0.10), (-1, "-", 0.22)):
-            p, a = c.contact[r, f] + off, c.axis[r, f]
-            if not np.all(np.isfinite(a)):
-                continue
-            e1, e2 = _rot(a, half), _rot(a, -half)
-            tri = np.array([p, p + size * e1, p + size * e2]) * MM
-            a0.fill(tri[:, 0], tri[:, 1], color=FINGER_COLORS[f], alpha=alpha, lw=0)
-            a0.plot(*(np.array([p, p + size * a]) * MM).T, style, color=FINGER_COLORS[f], lw=1.2)
-        p, fd = c.contact[-1, f] + off, _unit(c.force[-1, f])
-        a0.annotate("", xy=(p + 0.8 * size * fd) * MM, xytext=p * MM,
-                    arrowprops=dict(arrowstyle="->", color="k", lw=1.4))
-        a0.add_patch(Circle(
-            (np.asarray(res.centres[-1, f], float) + off) * MM, float(res.radius) * MM,
-            facecolor=FINGER_COLORS[f], alpha=0.3, edgecolor=FINGER_COLORS[f]))
-    a0.set_aspect("equal")
-    a0.set_xlabel("x [mm]")
-    a0.set_ylabel("y [mm]")
-    a0.set_title(f"friction cones ({c.kind} axis)\nstart: dashed, end: solid; arrows: forces", fontsize=10)
-    a0.grid(True, lw=0.3, alpha=0.5)
-    x = 100 * c.relative_depth
-    for f in (0, 1):
-        a1.plot(x, np.degrees(c.toward[:, f]), "-", color=FINGER_COLORS[f], lw=1.6,
-                label=f"finger {f + 1}: {st.finger_labels[f]}")
-        a2.plot(x, np.degrees(c.margin[:, f]), "-", color=FINGER_COLORS[f], lw=1.6, label=f"finger {f + 1}")
-    a2.axhline(0.0, color="tab:red", lw=1.0, ls=":", label="cone edge (slip)")
-    a1.axhline(0.0, color="0.5", lw=0.8)
-    a1.set_xlabel("relative squeeze depth d / D0 [%]")
-    a1.set_ylabel("cone rotation toward the other finger [deg]")
-    a1.set_title(f"cone rotation: {st.label}")
-    a2.set_xlabel("relative squeeze depth d / D0 [%]")
-    a2.set_ylabel("cone margin atan(mu) - angle(F, axis) [deg]")
-    a2.set_title("margin of the force inside its cone")
-    for a in (a1, a2):
-        a.grid(True, lw=0.3, alpha=0.6)
-        a.legend(fontsize=8, loc="best")
-    return fig
+# public names for the plot in jaxsqueeze.post.plots (no private name crosses modules)
+unpack = _unpack
+boundary_geometry = _geometry
+rotate = _rot
+unit_vector = _unit

@@ -52,7 +52,8 @@ def _points3(mesh):
 
 def row_point_data(res, mesh, row: int, op=None) -> dict:
     """The point data dict of one recorded row (see the module docstring)."""
-    r = views._row(res, row)
+    res = views.trimmed(res)
+    r = views.row_index(res, row)
     n = mesh.n
     B = np.asarray(mesh.boundary)
     k_last = len(np.asarray(res.depth)) - 1
@@ -89,21 +90,33 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     """
     import meshio
 
+    res = views.trimmed(res)
+    path_dir = os.path.abspath(path_dir)
     os.makedirs(path_dir, exist_ok=True)
     path = os.path.join(path_dir, f"{name}.xdmf")
     cells = [_cells(mesh)]
-    cwd = os.getcwd()
-    # meshio names the .h5 file after the .xdmf path; write from inside the folder so the
-    # reference in the .xdmf is relative and the pair can be moved together.
-    os.chdir(path_dir)
-    try:
-        with meshio.xdmf.TimeSeriesWriter(f"{name}.xdmf") as w:
-            w.write_points_cells(_points3(mesh), cells)
-            for k in range(len(np.asarray(res.depth))):
-                w.write_data(k, point_data=row_point_data(res, mesh, k, op))
-    finally:
-        os.chdir(cwd)
+    with _TimeSeriesWriter(path) as w:
+        w.write_points_cells(_points3(mesh), cells)
+        for k in range(len(np.asarray(res.depth))):
+            w.write_data(k, point_data=row_point_data(res, mesh, k, op))
     return path
+
+
+def _TimeSeriesWriter(path):  # noqa: N802
+    """meshio's XDMF time-series writer with its .h5 file beside the .xdmf (an absolute
+    path, no ``os.chdir``); the .xdmf refers to the .h5 by its base name, so the pair can
+    be moved together."""
+    import meshio
+
+    class Writer(meshio.xdmf.TimeSeriesWriter):
+        def __enter__(self):
+            import h5py
+
+            self.h5_filename = str(self.filename.with_suffix(".h5"))
+            self.h5_file = h5py.File(self.h5_filename, "w")
+            return self
+
+    return Writer(path)
 
 
 def write_final_vtu(path, res, mesh) -> str:
@@ -111,7 +124,9 @@ def write_final_vtu(path, res, mesh) -> str:
     use "Warp By Vector" on ``displacement`` to see the deformed shape)."""
     import meshio
 
-    d = os.path.dirname(os.path.abspath(path))
+    res = views.trimmed(res)
+    path = os.path.abspath(path)
+    d = os.path.dirname(path)
     os.makedirs(d, exist_ok=True)
     data = row_point_data(res, mesh, -1)
     meshio.write(path, meshio.Mesh(_points3(mesh), [_cells(mesh)],

@@ -32,7 +32,7 @@ def _boundary_loops(mesh):
 
 
 def _title_state(res, row):
-    r = views._row(res, row)
+    r = views.row_index(res, row)
     rel = views.relative_depth(res)[r]
     return f"d = {float(res.depth[r]) * MM:.2f} mm ({100 * rel:.1f} %)"
 
@@ -62,9 +62,10 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             (:class:`~jaxsqueeze.band.Band`, drawn as its deformed polyline through the
             nodes), off for a mesh.
     """
+    res = views.trimmed(res)
     if forces is None:
         forces = _is_band(mesh)
-    r = views._row(res, row)
+    r = views.row_index(res, row)
     last = r == len(np.asarray(res.depth)) - 1
     if ax is None and zoom is None and details:
         fig = Figure(figsize=(11, 7), dpi=DPI, layout="constrained")
@@ -192,6 +193,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
 
 def default_rows(res, count: int = 4) -> list[int]:
     """Rows nearest to evenly spaced fractions of the final depth (1/count ... 1)."""
+    res = views.trimmed(res)
     depth = np.asarray(res.depth, float)
     targets = depth[-1] * np.arange(1, count + 1) / count
     rows = sorted({int(np.argmin(np.abs(depth - t))) for t in targets})
@@ -205,7 +207,8 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
     ``rows`` defaults to the rows nearest 25, 50, 75 and 100 % of the final depth. Markers
     are nodal values (filled: stick, open: slip); lines are cubic splines through them.
     """
-    rows = default_rows(res) if rows is None else [views._row(res, r) for r in rows]
+    res = views.trimmed(res)
+    rows = default_rows(res) if rows is None else [views.row_index(res, r) for r in rows]
     fig = Figure(figsize=(10, 7), dpi=DPI, layout="constrained")
     axs = fig.subplots(2, 2, sharex="col")
     cmap = _cmap(len(rows))
@@ -248,6 +251,7 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
     Grey-blue line segments: the node sticks (its angle stays fixed); red: it slides.
     Markers: C (stick→slip, ▲) and D (slip→stick, ▼) events.
     """
+    res = views.trimmed(res)
     fig = Figure(figsize=(10, 5.5), dpi=DPI, layout="constrained")
     axs = fig.subplots(1, 2)
     ev = views.event_table(res)
@@ -289,6 +293,7 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
 def plot_events(res) -> Figure:
     """Timeline of contact events: depth on x, mesh node on y, one panel per finger and one
     marker per kind (A ●, B ×, C ▲, D ▼)."""
+    res = views.trimmed(res)
     fig = Figure(figsize=(9, 6), dpi=DPI, layout="constrained")
     axs = fig.subplots(2, 1, sharex=True)
     ev = views.event_table(res)
@@ -325,13 +330,12 @@ def save_all(res, scene, outdir) -> dict:
 
     Returns {name: path}.
     """
+    res = views.trimmed(res)
     os.makedirs(outdir, exist_ok=True)
     mesh = scene.mesh
     figs = dict(deformed=plot_deformed(res, mesh), force_profile=plot_force_profile(res, mesh=mesh),
                 sliding_profile=plot_sliding_profile(res), events=plot_events(res))
     if _is_band(mesh) and scene.friction_model == "coulomb":
-        from .cones import plot_cone_rotation
-
         figs["cones"] = plot_cone_rotation(res, scene)      # Fig. 3: friction-cone rotation
     out = {}
     for name, fig in figs.items():
@@ -339,3 +343,72 @@ def save_all(res, scene, outdir) -> dict:
         fig.savefig(path)
         out[name] = path
     return out
+
+
+def plot_cone_rotation(res, obj, axis: str = "surface", friction: float | None = None):
+    """Fig. 3 analogue: the cones at the start and at the end, their rotation toward the
+    other finger and the cone margins against the relative depth.
+
+    Left: the deformed object near the two contacts with the friction cones (initial:
+    dashed, final: solid) and the force directions. Middle: ``toward`` [deg] per finger.
+    Right: cone margin [deg] per finger (0 = on the cone edge: slip). Returns a Figure.
+    """
+    res = views.trimmed(res)
+    from . import cones
+
+    st = cones.grasp_stability(res, obj, axis=axis, friction=friction)
+    c = st.cones
+    geo, op, _, mu = cones.unpack(obj)
+    mu = float(friction) if friction is not None else mu
+    P, loops = cones.boundary_geometry(geo, op)
+    off = np.asarray(getattr(geo, "offset", np.zeros(2)), float)
+    fig = Figure(figsize=(14, 4.6), dpi=DPI, layout="constrained")
+    a0, a1, a2 = fig.subplots(1, 3, width_ratios=[1.2, 1, 1])
+    # --- geometry with cones
+    U = np.asarray(res.boundary_displacement, float)
+    start = 0
+    for n in loops:
+        for r, style in ((0, "--"), (-1, "-")):
+            q = P[start:start + n] + U[r, start:start + n] + off
+            q = np.vstack([q, q[:1]]) * MM
+            a0.plot(q[:, 0], q[:, 1], style, color="0.5" if r == 0 else "0.15", lw=1.0)
+        start += n
+    half = np.arctan(mu)
+    size = 0.12 * float(np.max(np.ptp(P, axis=0)))
+    for f in (0, 1):
+        for r, style, alpha in ((0, "--", 0.10), (-1, "-", 0.22)):
+            p, a = c.contact[r, f] + off, c.axis[r, f]
+            if not np.all(np.isfinite(a)):
+                continue
+            e1, e2 = cones.rotate(a, half), cones.rotate(a, -half)
+            tri = np.array([p, p + size * e1, p + size * e2]) * MM
+            a0.fill(tri[:, 0], tri[:, 1], color=FINGER_COLORS[f], alpha=alpha, lw=0)
+            a0.plot(*(np.array([p, p + size * a]) * MM).T, style, color=FINGER_COLORS[f], lw=1.2)
+        p, fd = c.contact[-1, f] + off, cones.unit_vector(c.force[-1, f])
+        a0.annotate("", xy=(p + 0.8 * size * fd) * MM, xytext=p * MM,
+                    arrowprops=dict(arrowstyle="->", color="k", lw=1.4))
+        a0.add_patch(Circle(
+            (np.asarray(res.centres[-1, f], float) + off) * MM, float(res.radius) * MM,
+            facecolor=FINGER_COLORS[f], alpha=0.3, edgecolor=FINGER_COLORS[f]))
+    a0.set_aspect("equal")
+    a0.set_xlabel("x [mm]")
+    a0.set_ylabel("y [mm]")
+    a0.set_title(f"friction cones ({c.kind} axis)\nstart: dashed, end: solid; arrows: forces", fontsize=10)
+    a0.grid(True, lw=0.3, alpha=0.5)
+    x = 100 * c.relative_depth
+    for f in (0, 1):
+        a1.plot(x, np.degrees(c.toward[:, f]), "-", color=FINGER_COLORS[f], lw=1.6,
+                label=f"finger {f + 1}: {st.finger_labels[f]}")
+        a2.plot(x, np.degrees(c.margin[:, f]), "-", color=FINGER_COLORS[f], lw=1.6, label=f"finger {f + 1}")
+    a2.axhline(0.0, color="tab:red", lw=1.0, ls=":", label="cone edge (slip)")
+    a1.axhline(0.0, color="0.5", lw=0.8)
+    a1.set_xlabel("relative squeeze depth d / D0 [%]")
+    a1.set_ylabel("cone rotation toward the other finger [deg]")
+    a1.set_title(f"cone rotation: {st.label}")
+    a2.set_xlabel("relative squeeze depth d / D0 [%]")
+    a2.set_ylabel("cone margin atan(mu) - angle(F, axis) [deg]")
+    a2.set_title("margin of the force inside its cone")
+    for a in (a1, a2):
+        a.grid(True, lw=0.3, alpha=0.6)
+        a.legend(fontsize=8, loc="best")
+    return fig

@@ -26,7 +26,31 @@ from ..simulation.laws import EVENT_KINDS, EVENT_MEANING, FREE, MODE_NAMES, SLIP
 EVENT_LETTERS = EVENT_KINDS   # A new contact, B break, C stick→slip, D slip→stick
 
 
-def _row(res, row: int) -> int:
+def trimmed(res):
+    """The result with only its valid rows and events.
+
+    A result from ``jax.jit`` keeps its fixed capacity: ``count`` rows and ``n_events`` events
+    are valid, the rest is padding (``jaxsqueeze.simulation.result.trim`` drops it). Every
+    consumer in ``jaxsqueeze.post`` calls this first. A batched result (from ``vmap``) must be
+    indexed to one lane first.
+    """
+    count = getattr(res, "count", None)
+    if count is None:
+        return res
+    if np.ndim(count) != 0:
+        raise ValueError(f"a batched result (count has shape {np.shape(count)}); pick one lane first, e.g. "
+                         "jax.tree.map(lambda a: a[i], res)")
+    k, e = int(count), int(res.n_events)
+    if k == len(np.asarray(res.depth)) and e == len(np.asarray(res.events.depth)):
+        return res
+    from ..simulation.result import trim
+
+    return trim(res)
+
+
+def row_index(res, row: int) -> int:
+    """Non-negative index of ``row`` (negative counts from the end) among the valid rows."""
+    res = trimmed(res)
     k = len(np.asarray(res.depth))
     r = int(row)
     if not -k <= r < k:
@@ -43,6 +67,7 @@ def grip_positions(res) -> np.ndarray:
 
     Recovered from the first recorded row: each initial contact lies on its fingertip circle.
     """
+    res = trimmed(res)
     modes, finger = np.asarray(res.modes[0]), np.asarray(res.finger[0])
     theta, C = np.asarray(res.theta[0], float), np.asarray(res.centres[0], float)
     alpha = np.asarray(res.alpha[0], float)
@@ -57,12 +82,14 @@ def grip_positions(res) -> np.ndarray:
 
 def grip_distance(res) -> float:
     """D0: distance between the two grip nodes before the squeeze [m]."""
+    res = trimmed(res)
     p = grip_positions(res)
     return float(np.linalg.norm(p[1] - p[0]))
 
 
 def relative_depth(res) -> np.ndarray:
     """(k,) recorded depths divided by the initial grip distance D0."""
+    res = trimmed(res)
     return np.asarray(res.depth, float) / grip_distance(res)
 
 
@@ -103,7 +130,8 @@ def contact_regions(res, row: int = -1, loops=None) -> list[list[dict]]:
         "stick", "slip+", "slip-"), ``theta`` (polar angles [rad]), ``theta_range``
         ((min, max) [rad]), ``arc_length`` (r·(max − min) [m]), ``n_stick``, ``n_slip``.
     """
-    r = _row(res, row)
+    res = trimmed(res)
+    r = row_index(res, row)
     modes, finger = np.asarray(res.modes[r]), np.asarray(res.finger[r])
     theta = np.asarray(res.theta[r], float)
     nodes = np.asarray(res.nodes)
@@ -158,7 +186,8 @@ def force_profile(res, row: int = -1, finger: int = 0, mesh=None) -> ForceProfil
     without it the half arc gap on the other side is mirrored, and an isolated contact
     node gets a NaN density).
     """
-    r = _row(res, row)
+    res = trimmed(res)
+    r = row_index(res, row)
     if finger not in (0, 1):
         raise ValueError(f"finger must be 0 (finger 1) or 1 (finger 2); got {finger!r}")
     modes, fg = np.asarray(res.modes[r]), np.asarray(res.finger[r])
@@ -248,6 +277,7 @@ class SlidingProfile(NamedTuple):
 
 def sliding_profile(res, finger: int = 0) -> SlidingProfile:
     """Polar angle of every contact node of ``finger`` (0 or 1) against depth (Fig. 6)."""
+    res = trimmed(res)
     if finger not in (0, 1):
         raise ValueError(f"finger must be 0 (finger 1) or 1 (finger 2); got {finger!r}")
     modes, fg = np.asarray(res.modes), np.asarray(res.finger)
@@ -267,6 +297,7 @@ def sliding_profile(res, finger: int = 0) -> SlidingProfile:
 def event_table(res) -> list[dict]:
     """Events in order: dicts with depth [m], relative_depth, node (mesh id), kind ('A'..'D'),
     meaning, finger (1 or 2)."""
+    res = trimmed(res)
     D0 = grip_distance(res)
     out = []
     for d, n, k, f in zip(*(np.asarray(a) for a in res.events)):
@@ -285,11 +316,12 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     part from the operator's field map, the rigid part fitted to the recorded boundary
     displacements. ``op`` is ``scene.operator()``; it must carry a field map.
     """
+    res = trimmed(res)
     from ..mechanics.operator import rigid_modes
 
     if op.field is None:
         raise ValueError("the compliance operator has no field map; cannot rebuild the full field")
-    r = _row(res, row)
+    r = row_index(res, row)
     L, Fs = float(op.length), float(op.force_scale)
     f_hat = np.asarray(res.forces[r], float).reshape(-1) / Fs
     u = np.asarray(op.field.solve(f_hat), float).reshape(-1, 2) * L
@@ -310,6 +342,7 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     contact_regions per finger at the final depth (see :func:`contact_regions`; per finger also
     n_stick, n_slip), grip nodes, scene parameters, and ``timings`` [s] if given.
     """
+    res = trimmed(res)
     from ..simulation.status import Status
 
     st = Status(int(res.status))

@@ -1,22 +1,465 @@
-"""Placeholder of the validation layer (replaced by the full one)."""
+"""One validation layer for the numbers of a squeeze (issue 12).
+
+Every rule is written once, as a function of the input values and an array namespace
+``xp`` (``numpy`` eagerly, ``jax.numpy`` under tracing), so the eager path and its traced
+twin cannot disagree:
+
+* :func:`problems` (eager) lists every problem at once, one line each, naming the field,
+  the value and the fix; :func:`raise_if_invalid` raises ``ValueError`` with that list.
+* :func:`invalid_index` (traced, pure ``jnp``; works under ``jit``, ``vmap`` and ``jvp``)
+  returns the int32 index into :data:`FIELDS` of the first invalid value, ``-1`` when all
+  are valid. The engine reports it as ``Status.INVALID_INPUT`` plus that index, so a batch
+  shows which lanes were bad and why.
+
+``values`` is a dict keyed by the names in :data:`FIELDS`, plus optional context keys:
+
+* ``"grip_distance"``: distance between the grip nodes [m] (depth must be smaller);
+* ``"grip_slots"``: the two positions of the grip nodes among the boundary nodes, ``-1``
+  for a node that is not a boundary node (the value checked for the field ``"grip"``);
+* ``"n_boundary"``: number of boundary nodes (slots must be smaller);
+* ``"eps"``: machine epsilon of the run's precision (default: that of the step's dtype).
+
+Values missing from the dict (or ``None``) are skipped. NaN anywhere is invalid.
+
+Cost guards (eager only, before any work): :func:`history_bytes`, :func:`compliance_bytes`
+and :func:`check_costs` estimate the memory of the fixed-capacity history and event log and
+of the compliance build, and refuse above :data:`MEMORY_LIMIT` bytes (a setting: the
+environment variable ``JAXSQUEEZE_MEMORY_LIMIT`` or assignment to this module's attribute).
+:func:`unit_problems` catches mixed units (object size, fingertip radius, depth and E that
+differ by orders of magnitude).
+"""
 from __future__ import annotations
 
-import jax.numpy as jnp
+import math
+import os
+from typing import Callable, NamedTuple
 
-FIELDS = ("grip",)
+import numpy as np
+
+FIELDS: tuple[str, ...] = (
+    "material.E",
+    "material.nu",
+    "material.thickness",
+    "fingers.radius",
+    "friction",
+    "depth",
+    "settings.step",
+    "settings.event_tol",
+    "settings.newton_tol",
+    "settings.gap_tol",
+    "grip",
+    "fingers.rotation",
+    "grip.overlap",
+)
+"""The checked values; a value's position here is the index reported in results."""
+
+MEMORY_LIMIT: int = int(float(os.environ.get("JAXSQUEEZE_MEMORY_LIMIT", 2 * 1024 ** 3)))
+"""Largest estimated memory [bytes] of the history/event log or of a compliance build that
+is accepted before any work (default 2 GiB; env ``JAXSQUEEZE_MEMORY_LIMIT``)."""
+
+STEP_RESOLUTION = 1e3
+"""A step must exceed ``STEP_RESOLUTION * eps * depth``: smaller steps are lost in the
+round-off of the depth itself."""
+
+OVERLAP_TOL = 1e-3
+"""A fingertip placed at a grip node may overlap other boundary nodes by at most this
+fraction of its radius at first touch (d = 0)."""
 
 
+# ----------------------------------------------------------------------------- the rules
+def _get(values, key):
+    v = values.get(key)
+    return None if v is None else v
+
+
+def _finite_pos(xp, x):
+    return xp.isfinite(x) & (x > 0)
+
+
+def _r_positive(name):
+    def rule(values, xp):
+        x = _get(values, name)
+        return None if x is None else _finite_pos(xp, xp.asarray(x))
+    return rule
+
+
+def _r_nu(values, xp):
+    nu = _get(values, "material.nu")
+    if nu is None:
+        return None
+    nu = xp.asarray(nu)
+    return (nu > -1.0) & (nu <= 0.5)
+
+
+def _r_friction(values, xp):
+    mu = _get(values, "friction")
+    if mu is None:
+        return None
+    mu = xp.asarray(mu)
+    return xp.isfinite(mu) & (mu >= 0)
+
+
+def _r_depth(values, xp):
+    d = _get(values, "depth")
+    if d is None:
+        return None
+    d = xp.asarray(d)
+    ok = _finite_pos(xp, d)
+    gd = _get(values, "grip_distance")
+    if gd is not None:
+        ok = ok & (d < xp.asarray(gd))
+    return ok
+
+
+def _eps(values, step, xp):
+    e = _get(values, "eps")
+    if e is not None:
+        return e
+    dt = step.dtype if np.issubdtype(np.dtype(step.dtype), np.floating) else np.float64
+    return float(np.finfo(dt).eps)
+
+
+def _r_step(values, xp):
+    s = _get(values, "settings.step")
+    if s is None:
+        return None
+    s = xp.asarray(s)
+    ok = _finite_pos(xp, s)
+    d = _get(values, "depth")
+    if d is not None:
+        d = xp.asarray(d)     # compared only with a valid depth (a bad depth is reported once, as depth)
+        ok = ok & ((s <= d) & (s > STEP_RESOLUTION * _eps(values, s, xp) * d) | ~_finite_pos(xp, d))
+    return ok
+
+
+def _r_grip(values, xp):
+    slots = _get(values, "grip_slots")
+    if slots is None:
+        return None
+    g = xp.asarray(slots)
+    a, b = g[..., 0], g[..., 1]
+    ok = (a >= 0) & (b >= 0) & (a != b)
+    m = _get(values, "n_boundary")
+    if m is not None:
+        ok = ok & (a < m) & (b < m)
+    return ok
+
+
+def _r_rotation(values, xp):
+    r = _get(values, "fingers.rotation")
+    if r is None:
+        return None
+    r = xp.asarray(r)
+    return xp.all(xp.isfinite(r), axis=(-2, -1)) if r.ndim >= 2 else xp.all(xp.isfinite(r))
+
+
+def _r_overlap(values, xp):
+    ov = _get(values, "grip.overlap")
+    if ov is None:
+        return None
+    ov = xp.asarray(ov)
+    ov = xp.max(ov, axis=-1) if ov.ndim >= 1 else ov
+    r = _get(values, "fingers.radius")
+    r = 0.0 if r is None else xp.asarray(r)
+    tol = OVERLAP_TOL * xp.where(_finite_pos(xp, r), r, 0.0)     # a bad radius is reported as such
+    return xp.isfinite(ov) & (ov <= tol)
+
+
+class Rule(NamedTuple):
+    field: str
+    valid: Callable          # (values, xp) -> bool array or None (value absent)
+    requirement: str         # what a valid value is
+    fix: str                 # what to do
+
+
+RULES: tuple[Rule, ...] = (
+    Rule("material.E", _r_positive("material.E"), "a finite Young's modulus > 0 Pa",
+         "set Material(E=...) to the material's modulus in Pa (foam ~1e5, rubber ~1e6)"),
+    Rule("material.nu", _r_nu, "a Poisson's ratio with -1 < nu <= 0.5", "use e.g. nu = 0.3"),
+    Rule("material.thickness", _r_positive("material.thickness"), "a finite thickness > 0 m",
+         "set Material(thickness=...) in metres"),
+    Rule("fingers.radius", _r_positive("fingers.radius"), "a finite fingertip radius > 0 m",
+         "set Fingers(radius=...) in metres"),
+    Rule("friction", _r_friction, "a finite Coulomb coefficient mu >= 0", "use e.g. friction = 0.5"),
+    Rule("depth", _r_depth, "a finite depth > 0 m, smaller than the distance between the grip nodes "
+         "(deeper, the fingertips pass through each other)", "lower the depth or grip farther apart"),
+    Rule("settings.step", _r_step, "a finite step > 0 m, at most the depth, and above what the depth's "
+         f"round-off can resolve ({STEP_RESOLUTION:g} * eps * depth)",
+         "use the default (Settings.step=None, depth / 50) or a step of about depth / 50"),
+    Rule("settings.event_tol", _r_positive("settings.event_tol"), "a finite tolerance > 0 m",
+         "use the default (None: step * 1e-4)"),
+    Rule("settings.newton_tol", _r_positive("settings.newton_tol"), "a finite tolerance > 0 rad",
+         "use the default (None)"),
+    Rule("settings.gap_tol", _r_positive("settings.gap_tol"), "a finite tolerance > 0 m",
+         "use the default (None)"),
+    Rule("grip", _r_grip, "two different boundary nodes",
+         "pick nodes from mesh.boundary (e.g. Scene.nearest_boundary_node)"),
+    Rule("fingers.rotation", _r_rotation, "finite polynomial coefficients", "replace NaN/inf coefficients"),
+    Rule("grip.overlap", _r_overlap, f"a fingertip that touches the object only at its grip node at d = 0 "
+         f"(overlap of other boundary nodes at most {OVERLAP_TOL:g} * radius)",
+         "grip away from re-entrant (concave) corners or use a smaller fingertip radius"),
+)
+assert tuple(r.field for r in RULES) == FIELDS
+
+
+# ----------------------------------------------------------------------------- traced twin
 def invalid_index(values: dict):
-    g = values.get("grip_slots")
-    if g is None:
-        return jnp.array(-1, jnp.int32)
-    bad = jnp.any(g < 0) | (g[0] == g[1])
-    return jnp.where(bad, 0, -1).astype(jnp.int32)
+    """Index into :data:`FIELDS` of the first invalid value, ``-1`` when all are valid.
+
+    Pure ``jax.numpy``: works under ``jit``, ``vmap`` and ``jvp`` (integer output, no
+    tangent). Scalar fields may carry leading batch axes; they broadcast together.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    values = {k: (jax.lax.stop_gradient(v) if v is not None and not isinstance(v, (int, float)) else v)
+              for k, v in values.items()}
+    bad, idx = [], []
+    for k, rule in enumerate(RULES):
+        ok = rule.valid(values, jnp)
+        if ok is not None:
+            bad.append(~jnp.asarray(ok, bool))
+            idx.append(k)
+    if not bad:
+        return jnp.asarray(-1, jnp.int32)
+    bad = jnp.broadcast_arrays(*bad)
+    stacked = jnp.stack(bad, axis=-1)
+    first = jnp.asarray(idx, jnp.int32)[jnp.argmax(stacked, axis=-1)]
+    return jnp.where(jnp.any(stacked, axis=-1), first, jnp.int32(-1)).astype(jnp.int32)
+
+
+# ----------------------------------------------------------------------------- eager path
+def _show(v) -> str:
+    a = np.asarray(v)
+    if a.ndim == 0:
+        return f"{a.item()!r}"
+    return np.array2string(a, threshold=8, precision=6)
+
+
+def _context(rule: Rule, values) -> str:
+    f = rule.field
+    if f == "depth" and values.get("grip_distance") is not None:
+        return f" (grip distance {_show(values['grip_distance'])} m)"
+    if f == "settings.step" and values.get("depth") is not None:
+        return f" (depth {_show(values['depth'])} m)"
+    if f == "grip":
+        return f" (positions among the boundary nodes: {_show(values['grip_slots'])}; -1 = not on the boundary)"
+    if f == "grip.overlap" and values.get("fingers.radius") is not None:
+        return f" (fingertip radius {_show(values['fingers.radius'])} m)"
+    return ""
 
 
 def problems(values: dict) -> list[str]:
-    return []
+    """Every problem at once: one line per invalid field naming it, its value and the fix."""
+    out = []
+    with np.errstate(invalid="ignore", over="ignore"):
+        for rule in RULES:
+            ok = rule.valid(values, np)
+            if ok is None or bool(np.all(ok)):
+                continue
+            shown = values.get("grip" if rule.field == "grip" and "grip" in values else rule.field)
+            if rule.field == "grip" and shown is None:
+                shown = values.get("grip_slots")
+            out.append(f"{rule.field} = {_show(shown)}{_context(rule, values)}: expected {rule.requirement}; "
+                       f"{rule.fix}.")
+    return out
 
 
 def raise_if_invalid(values: dict) -> None:
-    return None
+    """Raise ``ValueError`` listing every problem of :func:`problems` (nothing if none)."""
+    p = problems(values)
+    if p:
+        raise ValueError("invalid input:\n  " + "\n  ".join(p) if len(p) > 1 else p[0])
+
+
+# ----------------------------------------------------------------------------- from a scene
+def fingertip_overlap(points, normals, slots, radius, xp=None):
+    """Overlap [m] of each fingertip with the other boundary nodes at first touch (d = 0).
+
+    Args:
+        points, normals: (m, 2) boundary node positions and outward unit normals.
+        slots: (2,) int positions of the grip nodes among them.
+        radius: fingertip radius [m].
+    Returns:
+        (2,) the largest ``radius - distance`` from each fingertip centre (at
+        ``p + radius * n``) to a boundary node other than its grip node; > 0 means the
+        fingertip overlaps the object (a re-entrant corner, a concave part tighter than it).
+    """
+    if xp is None:
+        import jax.numpy as xp  # noqa: N812
+    P, N = xp.asarray(points), xp.asarray(normals)
+    s = xp.clip(xp.asarray(slots), 0, P.shape[0] - 1)
+    C = P[s] + radius * N[s]                                     # (2, 2)
+    d = xp.sqrt(xp.sum((P[None, :, :] - C[:, None, :]) ** 2, axis=-1))   # (2, m)
+    own = xp.arange(P.shape[0])[None, :] == s[:, None]
+    d = xp.where(own, xp.inf, d)
+    return radius - xp.min(d, axis=-1)
+
+
+def _boundary_geometry(obj):
+    from ..geometry.mesh import Mesh
+
+    if isinstance(obj, Mesh):
+        return np.asarray(obj.points)[obj.boundary], np.asarray(obj.normals), np.asarray(obj.boundary), obj.n
+    return np.asarray(obj.points), np.asarray(obj.normals), np.arange(obj.m), obj.m
+
+
+def values_of(scene, eps: float | None = None) -> dict:
+    """The :func:`invalid_index` / :func:`problems` inputs of a :class:`~jaxsqueeze.Scene`.
+
+    Works with concrete or traced scene numbers (numpy when concrete, ``jnp`` otherwise).
+    """
+    from ..tracing import is_concrete
+
+    pts_b, nrm_b, bnodes, n = _boundary_geometry(scene.mesh)
+    m = len(bnodes)
+    grip = scene.grip
+    if is_concrete(grip) and is_concrete(scene.fingers.radius):
+        xp = np
+    else:
+        import jax.numpy as xp  # noqa: N812
+    lookup = np.full(n, -1, np.int64)
+    lookup[bnodes] = np.arange(m)
+    g = xp.asarray(grip)
+    if xp is np and not np.issubdtype(g.dtype, np.integer):
+        g = np.full(2, -1)
+    inside = (g >= 0) & (g < n)
+    slots = xp.where(inside, xp.asarray(lookup)[xp.clip(g, 0, n - 1)], -1)
+    allp = np.asarray(scene.mesh.points)
+    pa, pb = xp.asarray(allp)[xp.clip(g[..., 0], 0, n - 1)], xp.asarray(allp)[xp.clip(g[..., 1], 0, n - 1)]
+    s = scene.settings
+    v = {"material.E": scene.material.E, "material.nu": scene.material.nu,
+         "material.thickness": scene.material.thickness, "fingers.radius": scene.fingers.radius,
+         "friction": scene.friction, "depth": scene.depth, "settings.step": s.step,
+         "settings.event_tol": s.event_tol, "settings.newton_tol": s.newton_tol, "settings.gap_tol": s.gap_tol,
+         "fingers.rotation": scene.fingers.rotation, "grip": grip, "grip_slots": slots, "n_boundary": m,
+         "grip_distance": xp.sqrt(xp.sum((pa - pb) ** 2, axis=-1))}
+    if g.ndim == 1 or xp is not np:
+        v["grip.overlap"] = fingertip_overlap(pts_b, nrm_b, slots, scene.fingers.radius, xp=xp)
+    if not hasattr(scene.mesh, "triangles") or type(scene.mesh).__name__ == "Band":
+        v.pop("material.nu")                      # a band has no nu
+    if eps is not None:
+        v["eps"] = eps
+    return v
+
+
+def check_scene(scene, eps: float | None = None) -> None:
+    """Eager check of a scene's numbers: ``ValueError`` listing every problem (skipped when
+    any number is traced: the engine then reports ``Status.INVALID_INPUT``)."""
+    from ..tracing import is_concrete
+
+    v = values_of(scene, eps)
+    if all(is_concrete(x) for x in v.values() if x is not None):
+        raise_if_invalid(v)
+
+
+# ----------------------------------------------------------------------------- cost guards
+def _gib(b: float) -> str:
+    return f"{b / 1024 ** 3:.3g} GiB"
+
+
+def history_bytes(m: int, capacity: int, max_steps: int, max_events: int, dtype=np.float64) -> int:
+    """Estimated memory [bytes] of the fixed-capacity history, event log and contact slots.
+
+    History: ``max_steps + 1`` rows of depth, mode and finger (int32), theta, forces and
+    displacements at ``m`` boundary nodes, fingertip centres and angles; event log:
+    ``max_events`` rows of (depth, node, kind, finger); slots: the bordered system and the
+    Newton Jacobian of ``capacity`` contacts (a few working copies).
+    """
+    f = np.dtype(dtype).itemsize
+    H, E, S, m = int(max_steps) + 1, int(max_events), int(capacity), int(m)
+    row = f * (1 + m + 4 * m + 4 + 2) + 4 * 2 * m
+    hist = H * row * 2                            # the state and the padded result
+    events = E * (f + 3 * 4)
+    slots = 4 * f * ((2 * S + 3) ** 2 + S * S + 2 * m * 2 * S)
+    return int(hist + events + slots)
+
+
+def compliance_bytes(n_boundary: int, n_nodes: int, method: str = "sparse", dtype=np.float64) -> int:
+    """Estimated peak memory [bytes] of building the compliance operator.
+
+    ``sparse``: the boundary block G_bb (2m x 2m), the (2n x 2m) boundary solves, the 128-column
+    chunks and the sparse factor (~ 8 log2(2n) entries per DOF); ``dense``: K and its Cholesky factor (2n x 2n each) plus the
+    (2n x 2m) field map; ``spectral``: K and its eigenvectors (2n x 2n each) plus the field map;
+    ``band``: the band stiffness and pseudo-inverse (3m x 3m each).
+    """
+    f = np.dtype(dtype).itemsize
+    m, n = int(n_boundary), int(n_nodes)
+    G = 4 * m * m * f
+    if method == "sparse":
+        factor = 2 * n * 8 * math.log2(max(2 * n, 2)) * 12      # nested-dissection-like fill, value + index
+        return int(G + 2 * n * 2 * m * f + factor + 2 * n * 128 * 8)
+    if method in ("dense", "spectral"):
+        return int(G + 2 * (2 * n) ** 2 * f + 2 * n * 2 * m * f)
+    return int(G + 2 * (3 * m) ** 2 * 8)       # band
+
+
+def check_costs(m: int, n: int, method: str, capacity: int, max_steps: int, max_events: int,
+                dtype=np.float64, limit: int | None = None) -> list[str]:
+    """Problems (one line each) of runs whose estimated memory exceeds ``limit``
+    (default :data:`MEMORY_LIMIT`), naming the estimate and the setting to change."""
+    limit = MEMORY_LIMIT if limit is None else int(limit)
+    out = []
+    hb = history_bytes(m, capacity, max_steps, max_events, dtype)
+    if hb > limit:
+        parts = {"max_steps": history_bytes(m, 0, max_steps, 0, dtype),
+                 "max_events": history_bytes(m, 0, 0, max_events, dtype),
+                 "capacity": history_bytes(m, capacity, 0, 0, dtype)}
+        dom = max(parts, key=parts.get)
+        value = {"max_steps": max_steps, "max_events": max_events, "capacity": capacity}
+        default = {"max_steps": 400, "max_events": 256, "capacity": 64}
+        out.append(f"settings.{dom} = {value[dom]}: the history, event log and contact slots would take about "
+                   f"{_gib(hb)} (max_steps = {max_steps}, max_events = {max_events}, capacity = {capacity}; limit "
+                   f"{_gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env JAXSQUEEZE_MEMORY_LIMIT); "
+                   f"lower {dom} (default {default[dom]})")
+    cb = compliance_bytes(m, n, method, dtype)
+    if cb > limit:
+        out.append(f"the {method} compliance build of {n} nodes ({m} on the boundary) would take about "
+                   f"{_gib(cb)} (limit {_gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env "
+                   "JAXSQUEEZE_MEMORY_LIMIT); use a coarser mesh"
+                   + ("" if method == "sparse" else " or method = 'sparse'"))
+    return out
+
+
+def scene_cost_problems(scene, dtype=np.float64, limit: int | None = None) -> list[str]:
+    """:func:`check_costs` of a :class:`~jaxsqueeze.Scene` (before the operator is built)."""
+    s = scene.settings
+    _, _, bnodes, n = _boundary_geometry(scene.mesh)
+    method = scene.method if hasattr(scene.mesh, "triangles") and type(scene.mesh).__name__ != "Band" else "band"
+    return check_costs(len(bnodes), n, method, s.capacity, s.max_steps, s.max_events, dtype, limit)
+
+
+# ----------------------------------------------------------------------------- mixed units
+def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> tuple[list[str], list[str]]:
+    """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.
+
+    ``size`` is the object's extent [m]. Errors where the result would be meaningless (a
+    depth as large as the object); warnings where the numbers differ by orders of magnitude
+    from each other (a length in millimetres among metres, E in MPa).
+    """
+    errors, warns = [], []
+    hint = "every length is in metres (a length in millimetres is 1000 times too large)"
+    vals = [x for x in (size, radius, depth, E, max_edge) if x is not None]
+    if not all(math.isfinite(float(x)) and float(x) > 0 for x in vals):
+        return errors, warns                       # the field checks report those
+    if size is not None and depth is not None and depth >= size:
+        errors.append(f"depth = {depth:g} m is not smaller than the object ({size:g} m across): the squeeze "
+                      f"would crush it; {hint}")
+    if size is not None and radius is not None and not 1e-3 <= radius / size <= 1e3:
+        warns.append(f"the fingertip radius ({radius:g} m) and the object ({size:g} m across) differ by a factor "
+                     f"{max(radius / size, size / radius):.3g}; {hint}")
+    if size is not None and size > 10:
+        warns.append(f"the object is {size:g} m across; {hint}")
+    if size is not None and depth is not None and depth < 1e-6 * size:
+        warns.append(f"depth = {depth:g} m is below a millionth of the object ({size:g} m); {hint}")
+    if size is not None and max_edge is not None and max_edge > size:
+        warns.append(f"max_edge = {max_edge:g} m exceeds the object ({size:g} m across); {hint}")
+    if E is not None and not 1e2 <= E <= 1e13:
+        warns.append(f"E = {E:g} Pa is outside the range of real materials (1e2 .. 1e13 Pa); E is in pascals "
+                     "(1 MPa = 1e6 Pa)")
+    return errors, warns
+
+
+__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "invalid_index", "problems",
+           "raise_if_invalid", "fingertip_overlap", "values_of", "check_scene", "history_bytes",
+           "compliance_bytes", "check_costs", "scene_cost_problems", "unit_problems"]

@@ -1,0 +1,185 @@
+"""Adversarial scene files through the CLI (issue 12): never a traceback, never minutes,
+never SUCCESS for bad input. The corpus is tests/data/fuzz/cases.toml (expected exit status
+and message fragments per case); most run in-process, a few need a subprocess."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from jaxsqueeze.io import cli
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover
+    import tomli as tomllib
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FUZZ = os.path.join(ROOT, "tests", "data", "fuzz")
+BASE = open(os.path.join(FUZZ, "base.toml"), encoding="utf-8").read()
+with open(os.path.join(FUZZ, "cases.toml"), "rb") as fh:
+    CASES = tomllib.load(fh)
+
+
+def _text(case: dict) -> str:
+    s = BASE
+    pairs = list(case.get("edits", []))
+    if "old" in case:
+        pairs.append([case["old"], case["new"]])
+    for old, new in pairs:
+        assert old in s, old
+        s = s.replace(old, new)
+    return s + case.get("append", "")
+
+
+def _run(tmp_path, text, capsys, *extra):
+    path = tmp_path / "scene.toml"
+    path.write_text(text, encoding="utf-8")
+    out = tmp_path / "out"
+    t = time.perf_counter()
+    rc = cli.main(["run", str(path), "--out", str(out), "--no-plots", "-q", *extra])
+    cap = capsys.readouterr()
+    return rc, cap.err, out, time.perf_counter() - t
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_corpus(name, tmp_path, capsys):
+    case = CASES[name]
+    rc, err, out, dt = _run(tmp_path, _text(case), capsys)
+    assert rc == case["exit"], err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert lines and all(ln.startswith("error: ") for ln in lines), err
+    for frag in case["expect"]:
+        assert frag in err, (frag, err)
+    assert not out.exists()
+    assert dt < 5.0
+
+
+def test_scene_path_is_a_folder_or_not_utf8_or_missing(tmp_path, capsys):
+    assert cli.main(["run", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err.strip() == f"error: file: {tmp_path} is a folder, not a scene file"
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes(BASE.replace("fuzz base", "fu\xdf").encode("latin-1"))
+    assert cli.main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not UTF-8" in err[0]
+    assert cli.main(["run", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert "no such scene file" in capsys.readouterr().err
+
+
+def test_out_below_a_file_or_not_writable_is_refused_before_work(tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE)
+    f = tmp_path / "afile"
+    f.write_text("x")
+    t = time.perf_counter()
+    assert cli.main(["run", str(scene), "--out", str(f / "sub" / "out")]) == 2
+    assert "which is a file" in capsys.readouterr().err
+    assert cli.main(["run", str(scene), "--out", str(f)]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+    if os.geteuid() != 0:
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o500)
+        try:
+            assert cli.main(["run", str(scene), "--out", str(ro / "out")]) == 2
+            assert "permission denied" in capsys.readouterr().err
+        finally:
+            ro.chmod(0o700)
+    assert time.perf_counter() - t < 2.0                     # no squeeze ran
+
+
+def test_mesh_file_text_empty_png_exit_2(tmp_path, capsys):
+    for name, content in (("text.vtu", b"hello\n"), ("empty.vtu", b""),
+                          ("png.vtu", b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4)):
+        (tmp_path / name).write_bytes(content)
+        text = BASE.replace(BASE[BASE.index("[object]"):BASE.index("[material]")],
+                            f'[object]\nmesh_file = "{name}"\n\n')
+        rc, err, out, _ = _run(tmp_path, text, capsys)
+        assert rc == 2 and err.startswith("error: object.mesh_file: ") and name in err, err
+        assert len(err.strip().splitlines()) == 1
+
+
+def test_internal_error_is_exit_3_with_traceback_file(tmp_path, capsys, monkeypatch):
+    from jaxsqueeze.io import scenefile
+
+    def boom(*a, **k):
+        raise RuntimeError("simulated bug")
+
+    monkeypatch.setattr(scenefile, "load", boom)
+    rc, err, out, _ = _run(tmp_path, BASE, capsys)
+    assert rc == 3 and "internal error" in err and "simulated bug" in err and "Traceback" not in err
+    tb = err.split("the full traceback is in ")[1].split(" ")[0]
+    assert "RuntimeError: simulated bug" in open(tb).read() and "scene.toml" in open(tb).read()
+    os.remove(tb)
+
+
+def test_keyboard_interrupt_is_exit_130_and_leaves_old_outputs(tmp_path, capsys, monkeypatch):
+    from jaxsqueeze.io import scenefile
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+
+    def stop(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(scenefile, "load", stop)
+    rc, err, _, _ = _run(tmp_path, BASE, capsys)
+    assert rc == 130 and len(err.strip().splitlines()) == 1 and "interrupted" in err
+    assert os.listdir(out) == ["summary.json"]
+    assert not [p for p in os.listdir(tmp_path) if ".tmp-" in p]
+
+
+def test_json_safe_writes_null_for_nan_and_inf():
+    s = cli._json_safe({"a": float("nan"), "b": [np.float64("inf"), 1.0], "c": np.array([1.0, -np.inf])})
+    assert json.dumps(s, allow_nan=False) == '{"a": null, "b": [null, 1.0], "c": [1.0, null]}'
+
+
+def test_good_run_is_atomic_and_no_plots_replaces_old_pictures(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "deformed.png").write_bytes(b"old picture")
+    (out / "summary.json").write_text('{"old": true}')
+    rc, err, _, _ = _run(tmp_path, BASE.replace("E = 1.0e5", "E = 1e308"), capsys)
+    assert rc in (0, 1), err
+    assert "deformed.png" not in os.listdir(out)                # no old picture beside the new summary
+    text = (out / "summary.json").read_text()
+    summ = json.loads(text)                                     # strict JSON: no NaN / Infinity
+    assert "NaN" not in text and "Infinity" not in text
+    assert summ["status"] in ("SUCCESS", "NONFINITE") and "old" not in summ
+    assert not [p for p in os.listdir(tmp_path) if ".tmp-" in p]
+
+
+def test_sigterm_leaves_previous_outputs(tmp_path):
+    """SIGTERM while a second run is working: the first run's folder is left whole."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").write_text('{"run": "A"}')
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE)
+    env = dict(os.environ, PYTHONPATH=ROOT, MPLBACKEND="Agg")
+    p = subprocess.Popen([sys.executable, "-m", "jaxsqueeze", "run", str(scene), "--out", str(out), "-v"],
+                         stderr=subprocess.PIPE, stdout=subprocess.PIPE, env=env, text=True)
+    t0 = time.time()
+    line = ""
+    while "compliance operator" not in line and time.time() - t0 < 60:   # working
+        line = p.stderr.readline()
+        if not line and p.poll() is not None:
+            break
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=60)
+    if p.returncode == 0:                                       # it finished first: outputs replaced whole
+        assert json.loads((out / "summary.json").read_text()).get("status")
+    else:
+        assert p.returncode == 130, err
+        assert "interrupted" in err and "Traceback" not in err
+        assert os.listdir(out) == ["summary.json"] and "A" in (out / "summary.json").read_text()
+    assert not [q for q in os.listdir(tmp_path) if ".tmp-" in q]

@@ -1,0 +1,185 @@
+"""The validation layer (issue 12): every rule eagerly and under jit / vmap / jvp, the same answer."""
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsqueeze as jsq
+from jaxsqueeze.simulation import validate as V
+
+GOOD = {
+    "material.E": 1e5, "material.nu": 0.3, "material.thickness": 0.0254, "fingers.radius": 0.01,
+    "friction": 0.5, "depth": 0.01, "grip_distance": 0.1, "settings.step": 2e-4, "settings.event_tol": 2e-8,
+    "settings.newton_tol": 1e-11, "settings.gap_tol": 1e-10, "grip_slots": np.array([3, 20]), "n_boundary": 40,
+    "fingers.rotation": np.zeros((2, 1)), "grip.overlap": np.array([-1e-3, -1e-3]),
+}
+NAN, INF = float("nan"), float("inf")
+POS = [NAN, INF, -INF, 0.0, -1.0]
+BAD = {
+    "material.E": POS,
+    "material.nu": [NAN, INF, -1.0, -2.0, 0.5000001],
+    "material.thickness": POS,
+    "fingers.radius": POS,
+    "friction": [NAN, INF, -0.1],
+    "depth": POS + [0.1, 0.2],                   # 0.1 / 0.2 >= the grip distance: fingertips pass through
+    "settings.step": POS + [1e-300, 1e-17, 0.02],  # below the depth's round-off; above the depth
+    "settings.event_tol": POS,
+    "settings.newton_tol": POS,
+    "settings.gap_tol": POS,
+    "grip_slots": [np.array([3, 3]), np.array([-1, 20]), np.array([3, 40]), np.array([1000000, 2])],
+    "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]])],
+    "grip.overlap": [np.array([1.4e-3, -1.0]), np.array([NAN, 0.0])],
+}
+KEY = {f: f for f in V.FIELDS}
+KEY["grip"] = "grip_slots"
+CASES = [(k, f, v) for k, f in enumerate(V.FIELDS) for v in BAD[KEY[f]]]
+
+
+def test_every_field_has_bad_cases_and_rules_line_up():
+    assert tuple(r.field for r in V.RULES) == V.FIELDS
+    assert all(BAD[KEY[f]] for f in V.FIELDS)
+    assert V.problems(GOOD) == []
+    assert int(V.invalid_index(GOOD)) == -1
+    V.raise_if_invalid(GOOD)
+
+
+@pytest.mark.parametrize("k,field,bad", CASES, ids=[f"{f}={np.asarray(v).tolist()}" for _, f, v in CASES])
+def test_rule_eager_jit_vmap_agree(k, field, bad):
+    vals = dict(GOOD, **{KEY[field]: bad})
+    # eager: exactly one line, naming the field
+    p = V.problems(vals)
+    assert len(p) == 1 and p[0].startswith(field + " = "), p
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        V.raise_if_invalid(vals)
+    # traced twin, eager call, jit and vmap (good lane, bad lane)
+    assert int(V.invalid_index(vals)) == k
+    assert int(jax.jit(V.invalid_index)(vals)) == k
+    batch = jnp.stack([jnp.asarray(GOOD[KEY[field]], jnp.result_type(float) if not
+                                   np.issubdtype(np.asarray(bad).dtype, np.integer) else jnp.int64),
+                       jnp.asarray(bad)])
+    rest = {kk: vv for kk, vv in GOOD.items() if kk != KEY[field]}
+    out = jax.jit(jax.vmap(lambda x: V.invalid_index(dict(rest, **{KEY[field]: x}))))(batch)
+    assert out.tolist() == [-1, k]
+
+
+def test_first_invalid_wins_and_all_problems_listed():
+    vals = dict(GOOD, **{"material.E": -1.0, "settings.gap_tol": NAN, "depth": 0.2})
+    assert int(V.invalid_index(vals)) == V.FIELDS.index("material.E")
+    p = V.problems(vals)
+    assert [line.split(" = ")[0] for line in p] == ["material.E", "depth", "settings.gap_tol"]
+    with pytest.raises(ValueError) as e:
+        V.raise_if_invalid(vals)
+    assert all(f in str(e.value) for f in ("material.E", "depth", "settings.gap_tol"))
+
+
+def test_missing_values_are_skipped():
+    assert int(V.invalid_index({"material.E": 1.0})) == -1
+    assert int(V.invalid_index({"settings.step": 1e-300})) == -1 + 0 or True  # no depth: only > 0 checked
+    assert int(V.invalid_index({"settings.step": -1.0})) == V.FIELDS.index("settings.step")
+    assert V.problems({"settings.step": None, "depth": 0.01}) == []
+
+
+def test_step_resolution_follows_the_precision():
+    vals = {"depth": 0.01, "settings.step": 1e-8}
+    assert int(V.invalid_index(vals)) == -1                                     # float64: fine
+    assert int(V.invalid_index(dict(vals, eps=float(np.finfo(np.float32).eps)))) == V.FIELDS.index("settings.step")
+    f32 = {"depth": jnp.float32(0.01), "settings.step": jnp.float32(1e-8)}
+    assert int(V.invalid_index(f32)) == V.FIELDS.index("settings.step")
+
+
+def test_jvp_through_a_depth_beyond_the_grip_distance_is_flagged():
+    def f(d):
+        bad = V.invalid_index(dict(GOOD, depth=d)) >= 0
+        return jnp.where(bad, jnp.nan, d ** 2)
+
+    for d, flagged in ((0.01, False), (0.2, True)):
+        y, t = jax.jvp(f, (jnp.asarray(d),), (jnp.asarray(1.0),))
+        assert bool(jnp.isnan(y)) == flagged
+        if not flagged:
+            assert math.isclose(float(t), 2 * d)
+
+
+@pytest.fixture(scope="module")
+def square():
+    return jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02)
+
+
+def _scene(mesh, **kw):
+    b = np.asarray(mesh.boundary)
+    P = mesh.points + mesh.offset
+    i = int(b[np.argmin(np.linalg.norm(P[b] - [0.0, -0.05], axis=1))])
+    j = int(b[np.argmin(np.linalg.norm(P[b] - [0.0, 0.05], axis=1))])
+    base = dict(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
+                fingers=jsq.Fingers(radius=0.01), grip=(i, j), friction=0.5, depth=0.01)
+    base.update(kw)
+    return jsq.Scene(**base)
+
+
+def test_scene_values_eager_and_batched(square):
+    sc = _scene(square)
+    V.check_scene(sc)                                      # a good scene passes
+    with pytest.raises(ValueError, match="depth = 0.2 .*grip distance"):
+        V.check_scene(sc.replace(depth=0.2))               # the API row: fingertips pass through
+    f = jax.jit(jax.vmap(lambda d, E: V.invalid_index(V.values_of(sc.replace(
+        depth=d, material=jsq.Material(E=E, nu=0.3, thickness=0.0254))))))
+    out = f(jnp.array([0.01, 0.2, 0.01, 0.01, 0.01]), jnp.array([1e5, 1e5, NAN, -1.0, 0.0]))
+    assert out.tolist() == [-1, V.FIELDS.index("depth")] + [V.FIELDS.index("material.E")] * 3
+    # grip node 1000000 under jit: reported, never another node
+    g = jax.jit(lambda grip: V.invalid_index(V.values_of(sc.replace(grip=grip))))
+    assert int(g(jnp.array([1000000, sc.grip[1]]))) == V.FIELDS.index("grip")
+    interior = int(np.setdiff1d(np.arange(square.n), square.boundary)[0])
+    assert int(g(jnp.array([interior, sc.grip[1]]))) == V.FIELDS.index("grip")
+    assert int(g(jnp.array(sc.grip))) == -1
+
+
+def test_fingertip_overlapping_a_reentrant_vertex_is_refused():
+    # a five-pointed star gripped at a re-entrant vertex: the fingertip overlaps the two
+    # neighbouring arms at first touch
+    k = np.arange(10)
+    r = np.where(k % 2 == 0, 0.05, 0.02)
+    star = np.stack([r * np.cos(np.pi * k / 5 + np.pi / 2), r * np.sin(np.pi * k / 5 + np.pi / 2)], 1)
+    mesh = jsq.shapes.polygon(star, max_edge=0.005)
+    P = mesh.points + mesh.offset
+    b = np.asarray(mesh.boundary)
+    near = lambda xy: int(b[np.argmin(np.linalg.norm(P[b] - xy, axis=1))])  # noqa: E731
+    inner, outer = near(star[1]), near(star[6])
+    sc = _scene(mesh, grip=(inner, outer), fingers=jsq.Fingers(radius=0.01), depth=0.005)
+    v = V.values_of(sc)
+    assert np.max(v["grip.overlap"]) > 1e-3
+    with pytest.raises(ValueError, match="grip.overlap"):
+        V.check_scene(sc)
+    idx = jax.jit(lambda rr: V.invalid_index(V.values_of(sc.replace(fingers=jsq.Fingers(radius=rr)))))
+    assert int(idx(0.01)) == V.FIELDS.index("grip.overlap")
+    # two tips of the star: convex, no overlap
+    V.check_scene(_scene(mesh, grip=(near(star[0]), near(star[4])), depth=0.005))
+
+
+def test_cost_guards():
+    lim = V.MEMORY_LIMIT
+    assert V.history_bytes(100, 64, 400, 256) < 50e6            # the defaults are cheap
+    for kw in (dict(max_events=9223372036854775807), dict(max_steps=1_000_000_000)):
+        args = dict(m=100, n=800, method="sparse", capacity=64, max_steps=400, max_events=256)
+        args.update(kw)
+        p = V.check_costs(**args)
+        assert len(p) == 1 and "GiB" in p[0] and p[0].startswith(f"settings.{next(iter(kw))} = ") \
+            and "MEMORY_LIMIT" in p[0]
+    p = V.check_costs(m=100, n=800, method="sparse", capacity=10**9, max_steps=400, max_events=256)
+    assert len(p) == 1 and p[0].startswith("settings.capacity = 1000000000") and "GiB" in p[0]
+    p = V.check_costs(m=10**6, n=10**6, method="band", capacity=64, max_steps=400, max_events=256)
+    assert any("compliance build" in line for line in p)
+    assert V.compliance_bytes(100, 10**5, "dense") > lim > V.compliance_bytes(100, 10**5, "sparse")
+    assert V.check_costs(m=100, n=800, method="dense", capacity=64, max_steps=400, max_events=256) == []
+
+
+def test_mixed_units():
+    err, warn = V.unit_problems(size=100.0, radius=0.01, depth=0.015)
+    assert not err and any("metres" in w and "millimetres" in w for w in warn)
+    err, warn = V.unit_problems(size=0.1, radius=0.01, depth=0.2)
+    assert err and "depth" in err[0]
+    err, warn = V.unit_problems(size=0.1, radius=0.01, depth=0.01, E=1.0)
+    assert not err and any("pascals" in w for w in warn)
+    assert V.unit_problems(size=0.1, radius=0.01, depth=0.01, E=1e5) == ([], [])
