@@ -21,6 +21,7 @@ from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from ..tracing import is_concrete
 from ..mechanics.operator import Compliance, field_displacement
+from ..geometry.mesh import Mesh
 from .scene import Scene
 from .status import Status
 
@@ -83,9 +84,14 @@ def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
               "friction": grasp.mu, "depth": grasp.depth, "settings.step": grasp.step,
               "settings.event_tol": grasp.event_tol, "settings.newton_tol": grasp.newton_tol,
               "settings.gap_tol": grasp.gap_tol, "fingers.rotation": grasp.rotation}
+    values["eps"] = float(jnp.finfo(op.G.dtype).eps)
+    if not isinstance(scene.mesh, Mesh):
+        values.pop("material.nu")                      # a band has no ν
     if scene.placement is None:
         gp = op.points[jnp.clip(grasp.grip, 0, op.m - 1)] * op.length
-        values.update({"grip_slots": grasp.grip, "grip_distance": jnp.linalg.norm(gp[1] - gp[0])})
+        values.update({"grip_slots": grasp.grip, "n_boundary": op.m, "grip_distance": jnp.linalg.norm(gp[1] - gp[0]),
+                       "grip.overlap": validate.fingertip_overlap(op.points * op.length, op.normals, grasp.grip,
+                                                                  grasp.radius)})
     else:
         values.update({"placement.s": grasp.placement[0], "placement.angle": grasp.placement[1]})
     if scene.adversary is not None:
@@ -157,8 +163,12 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     Eagerly, invalid input raises ``ValueError`` naming every bad field; under tracing it
     gives ``Status.INVALID_INPUT`` with ``result.invalid`` naming the field.
     """
-    op = scene.operator() if op is None else op
     concrete = is_concrete(scene)
+    if concrete:
+        costs = validate.scene_cost_problems(scene)
+        if costs:
+            raise ValueError("\n".join(costs))
+    op = scene.operator() if op is None else op
     if concrete and scene.placement is None:
         check_grip(scene, op)
     cfg = config_of(scene)
