@@ -46,12 +46,14 @@ def test_second_process_loads_the_squeeze_from_the_cache(tmp_path):
     first = _child(cache)
     assert first["path"] == str(cache) and first["status"] == "SUCCESS"
     assert first["x64"], "enable() must not touch other JAX options"
-    assert first["hits"] == 0 and first["misses"] >= 1
+    assert first["misses"] >= 1
     assert any(cache.iterdir()), "nothing was written to the cache folder"
     second = _child(cache)
     assert second["status"] == "SUCCESS"
-    assert second["hits"] >= 1, second          # the squeeze program came from disk
-    assert second["misses"] < first["misses"]
+    # the squeeze program came from disk. (The first process may hit too: under load a small
+    # program can take longer than the threshold, be written, and be compiled again later.)
+    assert second["hits"] > first["hits"], (first, second)
+    assert second["misses"] < first["misses"], (first, second)
 
 
 def test_default_path_and_idempotence(tmp_path, monkeypatch):
