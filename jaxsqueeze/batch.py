@@ -1,0 +1,190 @@
+"""Many squeezes on a multi-core CPU: one single-threaded worker process per core (DESIGN 2.10).
+
+On a CPU a ``jax.vmap`` over grasps does not use more cores (the loop's small solves run one
+system at a time), and a squeeze is a chain of small XLA operations that a shared thread pool
+only slows down. :func:`map_scenes` runs a plain function of one item in a pool of worker
+processes instead, each with XLA single-threaded, so ``processes`` workers keep that many
+cores busy::
+
+    from jaxsqueeze.batch import map_scenes
+
+    def evaluate(grip):                       # module level: workers import it by name
+        res = jsq.squeeze(SCENE.replace(grip=grip))
+        return int(res.outcome), float(res.grip_force)
+
+    out = map_scenes(evaluate, grips)         # results in the order of ``grips``
+
+Workers are started with the ``spawn`` method (JAX is not fork-safe), so ``fn`` and the items
+must be picklable and the calling script must guard its entry point with
+``if __name__ == "__main__":``. Each worker turns on the persistent compilation cache
+(:mod:`jaxsqueeze.compile_cache`), so only the first worker to reach a program compiles it;
+the others, and the next run, load it from disk. Each worker pays its imports and its first
+compile or cache load once (seconds): a pool pays off for batches that take longer than that.
+Return small results (numbers, small numpy arrays), not whole :class:`SqueezeResult` objects
+with their padded history, to keep the transfer back cheap.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from typing import Any, Callable, Iterable
+
+#: environment of a worker process: XLA and BLAS on one thread each
+WORKER_ENV = {
+    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+}
+
+
+def cpu_count() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:      # not on Linux
+        return os.cpu_count() or 1
+
+
+def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None = None,
+               chunk: int | None = None, progress: bool = True, cache: bool | str = True) -> list:
+    """``[fn(item) for item in items]``, spread over worker processes.
+
+    Args:
+        fn: a module-level function of one item (picklable by name) returning a small,
+            picklable result (numbers, numpy arrays, a small pytree of them).
+        items: the inputs; each must pickle.
+        processes: number of workers; ``None``: one per available core. ``1`` runs inline in
+            this process (no pool, no change to this process's configuration).
+        chunk: items per task sent to a worker; ``None``: about four tasks per worker.
+        progress: a one-line progress bar on stderr when stderr is a terminal.
+        cache: the workers' persistent compilation cache: ``True`` for the default folder
+            (:func:`jaxsqueeze.compile_cache.default_path`), a folder, or ``False`` for none.
+    Returns:
+        the results in the order of ``items``. An exception in ``fn`` is raised here, with
+        the index of the item that caused it.
+
+    The workers use this process's floating-point precision (``jax_enable_x64``) if JAX is
+    imported here, else JAX's default.
+    """
+    items = list(items)
+    n = len(items)
+    processes = cpu_count() if processes is None else int(processes)
+    if processes < 1:
+        raise ValueError(f"processes must be >= 1, got {processes}")
+    bar = _Progress(n, progress and sys.stderr.isatty())
+    if processes == 1 or n <= 1:
+        out = []
+        for i, item in enumerate(items):
+            out.append(_call(fn, i, item))
+            bar.update(1)
+        bar.close()
+        return out
+
+    processes = min(processes, n)
+    chunk = max(1, math.ceil(n / (4 * processes))) if chunk is None else max(1, int(chunk))
+    tasks = [(k, items[k:k + chunk]) for k in range(0, n, chunk)]
+    x64 = None
+    if "jax" in sys.modules:
+        x64 = bool(sys.modules["jax"].config.jax_enable_x64)
+    cache_path = None
+    if cache:
+        from . import compile_cache
+        cache_path = compile_cache.default_path() if cache is True else os.fspath(cache)
+
+    import multiprocessing as mp
+    out: list = [None] * n
+    with _environment(WORKER_ENV):          # spawned workers inherit it before they import jax
+        pool = ProcessPoolExecutor(processes, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+                                   initargs=(cache_path, x64))
+        try:
+            pending = {pool.submit(_run_chunk, fn, k, part): (k, len(part)) for k, part in tasks}
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+    try:
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                k, size = pending.pop(fut)
+                out[k:k + size] = fut.result()
+                bar.update(size)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    else:
+        pool.shutdown()
+    finally:
+        bar.close()
+    return out
+
+
+class ItemError(RuntimeError):
+    """``fn`` failed on one item (the original exception is the ``__cause__``)."""
+
+
+def _call(fn, i, item):
+    try:
+        return fn(item)
+    except Exception as exc:
+        raise ItemError(f"{getattr(fn, '__name__', fn)} failed on item {i}: {type(exc).__name__}: {exc}") from exc
+
+
+def _run_chunk(fn, start, part):
+    return [_call(fn, start + j, item) for j, item in enumerate(part)]
+
+
+def _init_worker(cache_path, x64):
+    os.environ.update(WORKER_ENV)           # already inherited; kept for a pool started elsewhere
+    import jax
+    if x64 is not None:
+        jax.config.update("jax_enable_x64", x64)
+    if cache_path:
+        from . import compile_cache
+        compile_cache.enable(cache_path)
+
+
+@contextmanager
+def _environment(env: dict):
+    old = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class _Progress:
+    """``[#####.....] 12/100  3.1 s  eta 10 s`` on one stderr line, redrawn at most 10× a second."""
+
+    def __init__(self, total, on):
+        self.total, self.on, self.done, self.t0, self.last = total, on and total > 0, 0, time.perf_counter(), 0.0
+
+    def update(self, k):
+        self.done += k
+        now = time.perf_counter()
+        if self.on and (now - self.last > 0.1 or self.done == self.total):
+            self.last = now
+            el = now - self.t0
+            w = 30
+            fill = int(w * self.done / self.total)
+            eta = el / self.done * (self.total - self.done) if self.done else float("nan")
+            sys.stderr.write(f"\r[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total}  {el:.1f} s  eta {eta:.0f} s ")
+            sys.stderr.flush()
+
+    def close(self):
+        if self.on:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+            self.on = False
+
+
+__all__ = ["ItemError", "WORKER_ENV", "cpu_count", "map_scenes"]

@@ -1,0 +1,79 @@
+"""The opt-in persistent compilation cache (jaxsqueeze.compile_cache): a second process loads
+the squeeze program from disk instead of compiling it (DESIGN 2.10)."""
+import json
+import os
+import subprocess
+import sys
+
+import jax
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# A tiny full-stick squeeze (its program is the smallest one) in a fresh process; reports the
+# persistent-cache events JAX records (jax.monitoring) while compiling it.
+CHILD = r"""
+import json, sys
+import jax
+jax.config.update("jax_enable_x64", True)
+from jax import monitoring
+events = {}
+monitoring.register_event_listener(lambda name, **kw: events.__setitem__(name, events.get(name, 0) + 1))
+import jaxsqueeze as jsq
+from jaxsqueeze import compile_cache
+path = compile_cache.enable(sys.argv[1])
+assert compile_cache.enable(sys.argv[1]) == path          # idempotent
+mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.025)
+sc = jsq.Scene(mesh=mesh, material=jsq.Material(1e5, 0.3, 0.0254), fingers=jsq.Fingers(radius=0.015),
+               grip=(jsq.scene.nearest_boundary_node(mesh, (0, -0.05)), jsq.scene.nearest_boundary_node(mesh, (0, 0.05))),
+               friction=0.5, depth=0.005, friction_model="stick")
+res = jsq.squeeze(sc)
+print(json.dumps(dict(path=path, x64=bool(jax.config.jax_enable_x64), status=res.outcome.name,
+                      hits=events.get("/jax/compilation_cache/cache_hits", 0),
+                      misses=events.get("/jax/compilation_cache/cache_misses", 0))))
+"""
+
+
+def _child(cache):
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""), JAX_PLATFORMS="cpu")
+    out = subprocess.run([sys.executable, "-c", CHILD, str(cache)], capture_output=True, text=True, env=env,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_second_process_loads_the_squeeze_from_the_cache(tmp_path):
+    cache = tmp_path / "jaxcache"
+    first = _child(cache)
+    assert first["path"] == str(cache) and first["status"] == "SUCCESS"
+    assert first["x64"], "enable() must not touch other JAX options"
+    assert first["misses"] >= 1
+    assert any(cache.iterdir()), "nothing was written to the cache folder"
+    second = _child(cache)
+    assert second["status"] == "SUCCESS"
+    # the squeeze program came from disk. (The first process may hit too: under load a small
+    # program can take longer than the threshold, be written, and be compiled again later.)
+    assert second["hits"] > first["hits"], (first, second)
+    assert second["misses"] < first["misses"], (first, second)
+
+
+def test_default_path_and_idempotence(tmp_path, monkeypatch):
+    from jaxsqueeze import compile_cache
+    monkeypatch.setenv(compile_cache.ENV, str(tmp_path / "c"))
+    assert compile_cache.default_path() == str(tmp_path / "c")
+    monkeypatch.delenv(compile_cache.ENV)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert compile_cache.default_path() == str(tmp_path / "xdg" / "jaxsqueeze" / "jax")
+    # enabling in this process: only the cache options change, and a second call is a no-op
+    before = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs,
+              jax.config.jax_persistent_cache_min_entry_size_bytes)
+    x64 = jax.config.jax_enable_x64
+    try:
+        p = compile_cache.enable(tmp_path / "here")
+        assert p == str(tmp_path / "here") and os.path.isdir(p)
+        assert compile_cache.enable(tmp_path / "here") == p and compile_cache.enabled() == p
+        assert jax.config.jax_enable_x64 == x64
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before[0])
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", before[2])
+        compile_cache._reset()
