@@ -82,6 +82,14 @@ def _parser() -> argparse.ArgumentParser:
                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("scene", metavar="SCENE.toml", help="scene file (see jaxsqueeze.scenefile)")
     common(r)
+    pl = sub.add_parser("plan", help="choose a grasp: grasp map, gradient search, best grasp",
+                        description="Map a grasp quality over every pair of finger positions, search it with "
+                                    "forward-mode gradients, squeeze the best grasp (the [plan] table of the "
+                                    "scene file sets quality, spacing, starts, steps, optimizer, learning_rate "
+                                    "and an adversary push). Writes map.png, best.png and summary.json.",
+                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    pl.add_argument("scene", metavar="SCENE.toml", help="scene file (see jaxsqueeze.scenefile)")
+    common(pl)
     d = sub.add_parser("demo", help="squeeze the built-in foam square",
                        description="Squeeze the built-in foam-square scene (jaxsqueeze/scenes/foam_square.toml).",
                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -199,7 +207,41 @@ def _main(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", spec.precision == "float64")
+    from .. import compile_cache
+
+    compile_cache.enable()            # a second process reuses the compiled squeeze
+    if args.command == "plan":
+        return _plan(spec, out, args, progress)
     return _simulate(spec, out, args, progress)
+
+
+def _plan(spec, out, args, progress) -> int:
+    import shutil
+    import tempfile
+
+    from .planning import plan_settings, run_plan
+
+    settings = plan_settings(spec.data.get("plan", {}))
+    progress.start("plan", "mapping and searching grasps")
+    parent = os.path.dirname(out)
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)}.tmp-", dir=parent)
+    try:
+        summary = run_plan(spec.scene, settings, tmp, progress=progress.enabled)
+        summary["files"] = {k: os.path.join(out, os.path.basename(v)) for k, v in summary["files"].items()}
+        with open(os.path.join(tmp, "summary.json"), "w", encoding="utf-8") as f:
+            json.dump(_json_safe(summary), f, indent=2, allow_nan=False)
+        _publish(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    progress.done()
+    if not args.quiet:
+        b = summary["best"]
+        print(f"best grasp: s = ({b['s'][0]:.4f}, {b['s'][1]:.4f}) m, {summary['quality']} = {b['quality']:.6g}, "
+              f"{b['status']}; map {summary['map']['squeezes']} squeezes, search {summary['search']['squeezes']}; "
+              f"outputs in {out}")
+    return 0 if summary["best"]["status"] == "SUCCESS" else 1
 
 
 def _json_safe(x):

@@ -39,6 +39,32 @@ class PlanSettings:
 KEYS = tuple(PlanSettings.__dataclass_fields__)
 
 
+def plan_settings(table: dict) -> PlanSettings:
+    """The :class:`PlanSettings` of a scene file's ``[plan]`` table; ``ValueError`` naming every
+    bad key (unknown keys are refused by the scene-file loader)."""
+    from ..plan.search import QUALITIES
+
+    errors, out = [], {}
+    for key, value in (table or {}).items():
+        if key in ("quality", "optimizer"):
+            ok = isinstance(value, str) and (key != "quality" or value in QUALITIES)
+            want = f"one of {QUALITIES}" if key == "quality" else "an optax optimizer name, e.g. \"adam\""
+        elif key in ("starts", "steps"):
+            ok = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 10_000
+            want = "an integer from 1 to 10000"
+        else:
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and (
+                value >= 0 if key in ("push",) else value > 0 if key in ("spacing", "learning_rate") else True)
+            want = "a finite number" + (" >= 0" if key == "push" else " > 0" if key in ("spacing", "learning_rate") else "")
+        if ok:
+            out[key] = value
+        else:
+            errors.append(f"plan.{key}: expected {want}, got {value!r}")
+    if errors:
+        raise ValueError("\n".join(errors))
+    return PlanSettings(**out)
+
+
 def _clean(v):
     """JSON-safe numbers: NaN and infinities become null."""
     if isinstance(v, dict):

@@ -113,6 +113,8 @@ TABLES = {
     "accuracy": {"step": False, "event_tol": False, "newton_tol": False, "gap_tol": False, "capacity": False,
                  "max_steps": False, "max_events": False, "newton_iters": False, "bisect_iters": False,
                  "precision": False},
+    "plan": {"quality": False, "spacing": False, "starts": False, "steps": False, "optimizer": False,
+             "learning_rate": False, "push": False, "push_at": False, "push_angle": False},
 }
 REQUIRED_TABLES = ("object", "material", "fingers", "grip", "squeeze")
 TOP_KEYS = ("title",)

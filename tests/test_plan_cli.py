@@ -1,0 +1,58 @@
+"""``jaxsqueeze plan SCENE.toml --out DIR``: map, search, best grasp, summary; [plan] errors."""
+import json
+
+from jaxsqueeze.io import cli
+
+SCENE = """\
+title = "coarse ellipse plan"
+
+[object]
+shape = "ellipse"
+a = 0.06
+b = 0.04
+max_edge = 0.012
+
+[material]
+E = 1.0e5
+nu = 0.3
+thickness = 0.0254
+
+[fingers]
+radius = 0.01
+
+[grip]
+points = [[0.06, 0.0], [-0.06, 0.0]]
+
+[squeeze]
+depth = 0.004
+friction = 0.5
+
+[plan]
+spacing = 0.03
+starts = 2
+steps = 3
+learning_rate = 0.02
+push = 0.002
+"""
+
+
+def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys):
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE)
+    out = tmp_path / "plan"
+    code = cli.main(["plan", str(path), "--out", str(out), "-q"])
+    assert code == 0, capsys.readouterr().err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["quality"] == "adversary_work" and s["best"]["status"] == "SUCCESS"
+    assert s["best"]["adversary_work_J"] > 0
+    assert abs(sum(s["best"]["finger_work_J"]) - s["best"]["adversary_work_J"]) < 1e-9 * s["best"]["adversary_work_J"]
+    assert s["map"]["squeezes"] > 0 and len(s["search"]["paths"]) >= 1
+    assert (out / "map.png").stat().st_size > 0 and (out / "best.png").stat().st_size > 0
+
+
+def test_plan_table_errors_name_the_key(tmp_path, capsys):
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE.replace("starts = 2", "starts = 0\nbogus = 1").replace("steps = 3", 'steps = "x"'))
+    code = cli.main(["plan", str(path), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "plan.bogus" in err and not (tmp_path / "o").exists()
