@@ -1,6 +1,9 @@
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the CLI turns JAX's persistent compilation cache on; in-process CLI tests must not flip it
+# for the rest of the suite
+os.environ["JAXSQUEEZE_NO_CACHE"] = "1"
 
 import jax  # noqa: E402
 

@@ -76,6 +76,8 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
         sp.add_argument("-v", "--verbose", action="store_true", help="progress on stderr even when it is not a terminal")
         sp.add_argument("-q", "--quiet", action="store_true", help="no progress and no summary on stdout")
+        sp.add_argument("--no-cache", dest="cache", action="store_false",
+                        help="do not use the persistent compilation cache (~/.cache/jaxsqueeze/jax)")
 
     r = sub.add_parser("run", help="squeeze the scene of a TOML file",
                        description="Squeeze the scene described by a TOML scene file.",
@@ -207,9 +209,10 @@ def _main(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", spec.precision == "float64")
-    from .. import compile_cache
+    if args.cache and not os.environ.get("JAXSQUEEZE_NO_CACHE"):
+        from .. import compile_cache
 
-    compile_cache.enable()            # a second process reuses the compiled squeeze
+        compile_cache.enable()        # a second process reuses the compiled squeeze
     if args.command == "plan":
         return _plan(spec, out, args, progress)
     return _simulate(spec, out, args, progress)
