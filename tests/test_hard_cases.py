@@ -323,7 +323,7 @@ def test_simultaneous_events_on_both_fingers(base):
     rows = base.events.rows()
     assert len(rows) == 4
     assert len({d for d, *_ in rows}) == 1, "mirror events located at different depths"
-    assert sorted(f for *_, f in rows) == [1, 1, 2, 2]
+    assert sorted(f for *_, f in rows) == [0, 0, 1, 1]
     P = SQ.points
     nodes = [n for _, n, _, _ in rows]
     for mirror in ([1, -1], [-1, 1]):
