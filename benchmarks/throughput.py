@@ -337,6 +337,10 @@ def main(argv=None):
     rec("reference", f"numpy/scipy row (row {k}: {int((modes[k] > 0).sum())} contacts, "
         f"{int((modes[k] >= 2).sum())} sliding, {ref['iters']} Newton its)", per_row_ms=1e3 * t_ref,
         rel_err_vs_jax=err, note="LU of 2s+3 bordered matrix, slip Newton, dtheta/deps, gaps, cone margins")
+    with threadpool_limits(1, "blas"):
+        t_ref1, _ = reference_row(inp, reps=max(20, 4 * a.reps))
+    rec("reference", "numpy/scipy row, OpenBLAS limited to 1 thread", per_row_ms=1e3 * t_ref1,
+        ratio_to_numpy=t_ref1 / t_ref)
     rec("reference", "jax solve_at alone on the same row (jitted, padded to capacity)", per_row_ms=1e3 * t_one,
         ratio_to_numpy=t_one / t_ref)
     rec("reference", "jax per recorded row in a squeeze (core / rows)", per_row_ms=1e3 * per_row,
