@@ -277,10 +277,11 @@ def main(argv=None):
     from jaxsqueeze.batch import cpu_count, map_scenes
     from jaxsqueeze.simulation import api as G
     from jaxsqueeze.simulation import engine as E
+    import squeeze as squeeze_mod
     from squeeze import load1, machine, write_csv
     import throughput as T      # pool workers import evaluate_grip from the module "throughput"
 
-    info = machine()
+    info = machine().replace(squeeze_mod.DATE, time.strftime("%Y-%m-%d"))
     print(info, flush=True)
     rows = []
 
@@ -304,6 +305,14 @@ def main(argv=None):
     n_rows = int(res.count)
     rec("squeeze", "core (jitted _run), best of reps", seconds=t_core, rows=n_rows, per_row_ms=1e3 * t_core / n_rows,
         events=int(res.n_events), bracket_iters=int(res.stats.bracket_iters), target=TARGETS["per_squeeze"])
+    from threadpoolctl import threadpool_limits
+
+    def core_1blas():
+        with threadpool_limits(1, "blas"):     # jaxlib's CPU LAPACK calls run in scipy's OpenBLAS
+            return jax.block_until_ready(core(op0, gr))
+    t_1b, _ = best_of(core_1blas, a.reps)
+    rec("squeeze", "core with OpenBLAS limited to 1 thread (threadpoolctl)", seconds=t_1b, rows=n_rows,
+        per_row_ms=1e3 * t_1b / n_rows, note="the squeeze's LAPACK calls are tiny; BLAS threads only wait")
     op = sc.operator()
     t_sq, _ = best_of(lambda: jsq.squeeze(sc.replace(friction=0.2 + 1e-9 * np.random.rand()), op=op), a.reps)
     rec("squeeze", "jsq.squeeze (incl. validation and trim)", seconds=t_sq, rows=n_rows,
@@ -328,6 +337,10 @@ def main(argv=None):
     rec("reference", f"numpy/scipy row (row {k}: {int((modes[k] > 0).sum())} contacts, "
         f"{int((modes[k] >= 2).sum())} sliding, {ref['iters']} Newton its)", per_row_ms=1e3 * t_ref,
         rel_err_vs_jax=err, note="LU of 2s+3 bordered matrix, slip Newton, dtheta/deps, gaps, cone margins")
+    with threadpool_limits(1, "blas"):
+        t_ref1, _ = reference_row(inp, reps=max(20, 4 * a.reps))
+    rec("reference", "numpy/scipy row, OpenBLAS limited to 1 thread", per_row_ms=1e3 * t_ref1,
+        ratio_to_numpy=t_ref1 / t_ref)
     rec("reference", "jax solve_at alone on the same row (jitted, padded to capacity)", per_row_ms=1e3 * t_one,
         ratio_to_numpy=t_one / t_ref)
     rec("reference", "jax per recorded row in a squeeze (core / rows)", per_row_ms=1e3 * per_row,
