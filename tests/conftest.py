@@ -19,3 +19,16 @@ def _persistent_cache_stays_off():
     cannot turn it off reliably, and XLA aborted the whole suite writing a later program."""
     yield
     assert not jax.config.jax_compilation_cache_dir, "a test turned the persistent compilation cache on"
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _free_compiled_programs():
+    """Drop this module's compiled programs when it ends. Every XLA:CPU executable holds its own
+    memory mappings; a whole suite in one process passed Linux's limit of 65,530 mappings per
+    process (vm.max_map_count), and the next compile aborted the process."""
+    yield
+    jax.clear_caches()
+    path = os.environ.get("JAXSQUEEZE_MAPS_LOG")
+    if path:                                    # diagnosis: mappings left after each module
+        with open(path, "a") as f, open("/proc/self/maps") as maps:
+            f.write(f"{sum(1 for _ in maps)}\n")
