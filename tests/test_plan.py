@@ -116,16 +116,35 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
     assert float(Q.failure_push(res)) == pytest.approx(0.003)
 
 
-def test_search_reaches_the_best_of_the_exhaustive_map(ellipse):
-    """Two starts from a coarse map reach (or pass) the best quality of a finer exhaustive map,
-    with fewer squeezes."""
-    P = float(ellipse.curve().perimeter)
-    fine = plan.grasp_map(ellipse, "squeeze_work", spacing=P / 24, progress=False)
+PLANNING_OBJECTS = {     # coarse meshes: a fine exhaustive map at node spacing stays affordable in a test
+    "square": lambda: jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01),
+    "ellipse": lambda: jsq.shapes.ellipse(0.06, 0.04, max_edge=0.01),
+    "L-shape": lambda: jsq.shapes.polygon([(0, 0), (0.1, 0), (0.1, 0.05), (0.05, 0.05), (0.05, 0.1), (0, 0.1)],
+                                          max_edge=0.01),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(PLANNING_OBJECTS))
+def test_search_reaches_the_best_of_the_exhaustive_map(name):
+    """Issue 10: five starts from a screened coarse map reach within 2 % of the best quality of an
+    exhaustive map at node spacing (or pass it: placements between nodes are allowed), with at
+    most a tenth of its squeezes, on a square, an ellipse and a non-convex L-shape."""
+    import optax
+
+    mesh = PLANNING_OBJECTS[name]()
+    sc = jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.01), placement=plan.Placement(s=(0.0, 0.1)),
+                   friction=0.5, depth=0.008)
+    op = sc.operator()
+    P = float(sc.curve().perimeter)
+    fine = plan.grasp_map(sc, "squeeze_work", op=op, progress=False)          # node spacing
+    assert fine.evaluations == mesh.m * (mesh.m - 1) // 2
     best = float(fine.quality[fine.feasible()].max())
-    found = plan.optimize_placement(ellipse, "squeeze_work", starts=2, steps=8, coarse_spacing=P / 8,
-                                    progress=False)
-    assert found.quality >= 0.98 * best
-    assert found.squeezes < fine.evaluations
-    res = jsq.squeeze(ellipse.replace(placement=found.best))
+    found = plan.optimize_placement(sc, "squeeze_work", starts=5, steps=12, coarse_spacing=P / 12, op=op,
+                                    optimizer=optax.adam(0.03), progress=False, budget=fine.evaluations // 10)
+    assert found.quality >= 0.98 * best, (found.quality, best)
+    assert found.squeezes <= fine.evaluations / 10, (found.squeezes, fine.evaluations)
+    assert found.screened == 66 and len(found.history) == 5
+    res = jsq.squeeze(sc.replace(placement=found.best), op=op)
     assert res.outcome == jsq.Status.SUCCESS
     np.testing.assert_allclose(float(Q.squeeze_work(res)), found.quality, rtol=1e-9)

@@ -72,6 +72,17 @@ def _batch(scene, qfn, op, X):
 _one = jax.jit(_summary, static_argnums=(1,))
 
 
+@partial(jax.jit, static_argnums=(1,))
+def _value_and_grad(scene, qfn, op, u, scale):
+    """(Summary, d quality / du (3,)) at scaled coordinates u = x * scale, by ``jax.jacfwd``.
+    Module level, so every search on a scene of the same shapes reuses one compiled program."""
+    def f(u):
+        s = _summary(scene, qfn, op, u / scale)
+        return s.quality, s
+    g, s = jax.jacfwd(f, has_aux=True)(u)
+    return s, g
+
+
 def _progress(done, total, t0, label):
     if sys.stderr.isatty():
         rate = done / max(time.perf_counter() - t0, 1e-9)
@@ -209,29 +220,35 @@ class Search(NamedTuple):
 
     best: the best :class:`Placement` found; quality: its quality; history: one list of
     :class:`Step` per start; squeezes: forward squeezes run (each gradient is one squeeze
-    carrying 2–3 tangents), including the coarse map's.
+    carrying 2–3 tangents), including the coarse map's; screened: coarse pairs put through the
+    cone test alone (no squeeze; only those that pass are squeezed).
     """
 
     best: Placement
     quality: float
     history: list
     squeezes: int
+    screened: int = 0
 
 
 def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimizer=None, steps: int = 40,
                        starts: int = 5, coarse_spacing=None, vary_angle: bool = False, op=None,
-                       progress: bool = True) -> Search:
+                       progress: bool = True, budget: int | None = None) -> Search:
     """Gradient-based placement search (maximizes ``quality``).
 
     Args:
         scene: the scene (its grip/placement is replaced by the candidates).
         quality: a name in ``QUALITIES`` or a function result → ().
         init: (k, 2 or 3) starting candidates (s_0, s_1[, angle]); default: the ``starts`` best
-            cells of a coarse map (``coarse_spacing``, default perimeter / 16).
+            cells of a coarse map (``coarse_spacing``, default perimeter / 16) on which only the
+            pairs that pass the cone test (:func:`candidate_pairs`) are squeezed.
         optimizer: an optax optimizer (default ``optax.adam(0.02)``) acting on the scaled
             coordinates u = (2π s_0 / P, 2π s_1 / P, angle) [rad], P the perimeter.
         steps: iterations per start.
         vary_angle: also move the squeeze-direction offset (default: keep it).
+        budget: the most squeezes to run, coarse map included (default: no limit). After the
+            coarse map the rest is shared evenly by the starts: each runs at most
+            ``budget_left // starts - 1`` iterations (and at most ``steps``).
     Forward-mode gradients (``jax.jacfwd``) of the quality; a step that lands on a failed or
     infeasible placement is undone and the step scale halved (the constraint is the status;
     its margin is in the history). Returns a :class:`Search`.
@@ -244,24 +261,32 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     scale = np.array([2 * math.pi / P, 2 * math.pi / P, 1.0])
     optimizer = optax.adam(0.02) if optimizer is None else optimizer
     squeezes = 0
+    screened = 0
     if init is None:
-        cmap = grasp_map(scene, qfn, spacing=coarse_spacing or P / 16, op=op, progress=progress)
-        squeezes += cmap.evaluations
-        init = cmap.best[:starts]
+        # the coarse map, screened: only pairs whose first contacts pass the cone test (the
+        # approach and Section I-A's test, no squeeze) are squeezed
+        spacing = coarse_spacing or P / 16
+        screened = len(grid(scene, spacing)) * (len(grid(scene, spacing)) - 1) // 2
+        X = candidate_pairs(scene, spacing, op=op)
+        summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
+        squeezes += len(X)
+        ok = np.zeros(0, bool) if summ is None else summ.status == Status.SUCCESS
+        order = np.argsort(-np.where(ok, summ.quality, -np.inf)) if len(X) else np.zeros(0, int)
+        init = X[order[ok[order]]][:starts]
         if len(init) == 0:
             raise ValueError("no feasible placement on the coarse map: refine coarse_spacing or change the scene")
     init = np.atleast_2d(np.asarray(init, float))
+    if budget is not None:
+        steps = min(steps, (int(budget) - squeezes) // len(init) - 1)
+        if steps < 0:
+            raise ValueError(f"budget={budget} squeezes is spent before the search starts ({squeezes} on the "
+                             "coarse map): raise the budget or coarsen coarse_spacing")
     if init.shape[1] == 2:
         init = np.concatenate([init, np.zeros((len(init), 1))], 1)
     mask = np.array([1.0, 1.0, 1.0 if vary_angle else 0.0])
 
-    @jax.jit
-    def value_and_grad(u):
-        def f(u):
-            s = _summary(scene, qfn, op, u / scale)
-            return s.quality, s
-        g, s = jax.jacfwd(f, has_aux=True)(u)
-        return s, g
+    scale_ = jnp.asarray(scale)
+    value_and_grad = lambda u: _value_and_grad(scene, qfn, op, u, scale_)  # noqa: E731
 
     histories, best_x, best_q = [], None, -np.inf
     for k, x0 in enumerate(init):
@@ -291,4 +316,4 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
             print(f"start {k + 1}/{len(init)}: best {best_q:.6g}", file=sys.stderr)
     if best_x is None:
         raise ValueError("no start reached a successful squeeze")
-    return Search(Placement(s=best_x[:2], angle=float(best_x[2])), best_q, histories, squeezes)
+    return Search(Placement(s=best_x[:2], angle=float(best_x[2])), best_q, histories, squeezes, screened)
