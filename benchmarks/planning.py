@@ -26,7 +26,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 COLS = ["object", "nodes", "boundary", "fine_pairs", "fine_s", "fine_best", "search_best", "ratio",
-        "search_squeezes", "squeeze_fraction", "search_s", "loop_per_s", "vmap_per_s", "load"]
+        "search_squeezes", "squeeze_fraction", "search_s", "loop_per_s", "vmap_per_s", "processes_per_s", "load"]
 
 
 def objects(quick):
@@ -69,7 +69,13 @@ def main(argv=None):
             t = time.perf_counter()
             plan.evaluate(sc, C, op=op, batch=batch, chunk=8, progress=False)
             rates[batch] = len(C) / (time.perf_counter() - t)
-        print(f"{name}: loop {rates['loop']:.2f}/s, vmap {rates['vmap']:.2f}/s", flush=True)
+        # a process pool pays its workers' start-up and compile (or cache load): a longer batch
+        t = time.perf_counter()
+        C2 = np.stack([X[i], X[j], np.zeros(len(i))], 1)[:128]
+        plan.evaluate(sc, C2, op=op, batch="processes", chunk=16, progress=False)
+        rates["processes"] = len(C2) / (time.perf_counter() - t)
+        print(f"{name}: loop {rates['loop']:.2f}/s, vmap {rates['vmap']:.2f}/s, "
+              f"processes {rates['processes']:.2f}/s", flush=True)
         t = time.perf_counter()
         fine = plan.grasp_map(sc, "squeeze_work", op=op, progress=True)
         fine_s = time.perf_counter() - t
@@ -82,6 +88,7 @@ def main(argv=None):
                    fine_best=best, search_best=found.quality, ratio=found.quality / best,
                    search_squeezes=found.squeezes, squeeze_fraction=found.squeezes / fine.evaluations,
                    search_s=round(search_s, 1), loop_per_s=round(rates["loop"], 2), vmap_per_s=round(rates["vmap"], 2),
+                   processes_per_s=round(rates["processes"], 2),
                    load=round(os.getloadavg()[0], 2))
         rows.append(row)
         print({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()}, flush=True)

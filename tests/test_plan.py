@@ -116,6 +116,20 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
     assert float(Q.failure_push(res)) == pytest.approx(0.003)
 
 
+def test_map_chunks_across_processes_equal_the_loop(ellipse, tmp_path):
+    """evaluate(batch="processes"): chunks of candidates looped in two worker processes give
+    the loop's statuses and qualities, in input order (an infeasible pair included)."""
+    P = float(ellipse.curve().perimeter)
+    X = np.concatenate([plan.candidate_pairs(ellipse, spacing=P / 8)[:3], [[0.0, 0.004, 0.0]]])
+    loop = plan.evaluate(ellipse, X, batch="loop", progress=False)
+    pooled = plan.evaluate(ellipse, X, batch="processes", processes=2, chunk=2, progress=False,
+                           cache=tmp_path / "cache")
+    assert int(loop.status[-1]) == jsq.Status.INFEASIBLE_GRIP and np.any(loop.status == jsq.Status.SUCCESS)
+    np.testing.assert_array_equal(pooled.status, loop.status)
+    np.testing.assert_allclose(pooled.quality, loop.quality, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(pooled.grip_force, loop.grip_force, rtol=1e-12, atol=0)
+
+
 PLANNING_OBJECTS = {     # coarse meshes: a fine exhaustive map at node spacing stays affordable in a test
     "square": lambda: jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01),
     "ellipse": lambda: jsq.shapes.ellipse(0.06, 0.04, max_edge=0.01),

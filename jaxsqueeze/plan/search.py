@@ -90,23 +90,39 @@ def _progress(done, total, t0, label):
               file=sys.stderr, flush=True)
 
 
+def _evaluate_part(scene: Scene, quality, op, X) -> Summary:
+    """One worker's share of :func:`evaluate` with ``batch="processes"`` (module level: picklable)."""
+    return evaluate(scene, X, quality, op=op, batch="loop", progress=False)
+
+
 def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "auto", chunk: int = 64,
-             progress: bool = True) -> Summary:
+             progress: bool = True, processes: int | None = None, cache=True) -> Summary:
     """Summaries of candidates ``X`` (B, 3) = (s_0 [m], s_1 [m], angle [rad]) as numpy arrays (B,).
 
     ``batch``: "vmap" (one compiled ``vmap`` per chunk of ``chunk`` candidates, the last one
     padded: what pays on a GPU), "loop" (one compiled squeeze called per candidate: faster on
-    a CPU, where a batched loop runs every lane's event location at every step), or "auto"
-    (vmap on an accelerator, loop on the CPU). A failed or infeasible candidate returns its
-    status with quality 0 and costs only its first solve in a loop.
+    a CPU, where a batched loop runs every lane's event location at every step),
+    "processes" (chunks of ``chunk`` candidates looped in ``processes`` worker processes, one
+    per core by default, through :func:`jaxsqueeze.batch.map_scenes`; ``cache`` is the workers'
+    persistent compilation cache; ``quality`` must then be a name or a module-level function),
+    or "auto" (vmap on an accelerator, loop on the CPU). A failed or infeasible candidate
+    returns its status with quality 0 and costs only its first solve in a loop.
     """
     X = np.atleast_2d(np.asarray(X, float))
     op = scene.operator() if op is None else op
     qfn = quality_of(scene, quality)
     if batch == "auto":
         batch = "loop" if jax.default_backend() == "cpu" else "vmap"
-    if batch not in ("vmap", "loop"):
-        raise ValueError(f"batch={batch!r}; choose 'auto', 'vmap' or 'loop'")
+    if batch not in ("vmap", "loop", "processes"):
+        raise ValueError(f"batch={batch!r}; choose 'auto', 'vmap', 'loop' or 'processes'")
+    if batch == "processes":
+        import dataclasses
+
+        from ..batch import map_scenes
+        part = partial(_evaluate_part, scene, quality, dataclasses.replace(op, field=None))
+        parts = [X[k:k + chunk] for k in range(0, len(X), chunk)]
+        out = map_scenes(part, parts, processes=processes, chunk=1, progress=progress, cache=cache)
+        return Summary(*(np.concatenate(a) for a in zip(*out)))
     out, t0 = [], time.perf_counter()
     if batch == "loop":
         for k, x in enumerate(X):
@@ -157,8 +173,10 @@ def grid(scene: Scene, spacing=None) -> np.ndarray:
 
 
 def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float = 0.0, op=None,
-              batch: str = "auto", chunk: int = 64, progress: bool = True, keep: int = 8) -> GraspMap:
-    """Evaluate ``quality`` over every pair of boundary positions at ``spacing`` [m].
+              batch: str = "auto", chunk: int = 64, progress: bool = True, keep: int = 8,
+              processes: int | None = None) -> GraspMap:
+    """Evaluate ``quality`` over every pair of boundary positions at ``spacing`` [m]
+    (``batch``, ``chunk`` and ``processes`` as in :func:`evaluate`).
 
     Finger roles swapped give the same grasp (the squeeze is linear and total), so each
     unordered pair is squeezed once and the map is mirrored. Returns a :class:`GraspMap`.
@@ -167,7 +185,7 @@ def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float =
     n = len(s)
     i, j = np.triu_indices(n, 1)
     X = np.stack([s[i], s[j], np.full(len(i), float(angle))], 1)
-    summ = evaluate(scene, X, quality, op=op, batch=batch, chunk=chunk, progress=progress)
+    summ = evaluate(scene, X, quality, op=op, batch=batch, chunk=chunk, progress=progress, processes=processes)
     full = {}
     for name in ("quality", "status", "grip_force", "margin"):
         a = np.full((n, n), Status.INFEASIBLE_GRIP if name == "status" else (0.0 if name != "margin" else -np.pi))
