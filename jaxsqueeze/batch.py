@@ -88,9 +88,9 @@ def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None 
     processes = min(processes, n)
     chunk = max(1, math.ceil(n / (4 * processes))) if chunk is None else max(1, int(chunk))
     tasks = [(k, items[k:k + chunk]) for k in range(0, n, chunk)]
-    x64 = None
-    if "jax" in sys.modules:
-        x64 = bool(sys.modules["jax"].config.jax_enable_x64)
+    env = dict(WORKER_ENV)
+    if "jax" in sys.modules:                # the workers read the caller's precision at their jax import
+        env["JAX_ENABLE_X64"] = "1" if sys.modules["jax"].config.jax_enable_x64 else "0"
     cache_path = None
     if cache:
         from . import compile_cache
@@ -98,9 +98,9 @@ def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None 
 
     import multiprocessing as mp
     out: list = [None] * n
-    with _environment(WORKER_ENV):          # spawned workers inherit it before they import jax
+    with _environment(env):                 # spawned workers inherit it before they import jax
         pool = ProcessPoolExecutor(processes, mp_context=mp.get_context("spawn"), initializer=_init_worker,
-                                   initargs=(cache_path, x64))
+                                   initargs=(cache_path,))
         try:
             pending = {pool.submit(_run_chunk, fn, k, part): (k, len(part)) for k, part in tasks}
         except BaseException:
@@ -138,11 +138,7 @@ def _run_chunk(fn, start, part):
     return [_call(fn, start + j, item) for j, item in enumerate(part)]
 
 
-def _init_worker(cache_path, x64):
-    os.environ.update(WORKER_ENV)           # already inherited; kept for a pool started elsewhere
-    import jax
-    if x64 is not None:
-        jax.config.update("jax_enable_x64", x64)
+def _init_worker(cache_path):
     if cache_path:
         from . import compile_cache
         compile_cache.enable(cache_path)

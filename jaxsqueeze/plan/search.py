@@ -22,7 +22,7 @@ import numpy as np
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
 from ..simulation.status import Status
-from . import quality as Q
+from .quality import adversary_work, grip_force, slip_margin, squeeze_work
 
 
 class Summary(NamedTuple):
@@ -44,12 +44,12 @@ def quality_of(scene: Scene, quality) -> Callable:
         return quality
     if quality == "slip_margin":
         mu = scene.friction
-        return lambda res: Q.slip_margin(res, mu)
+        return lambda res: slip_margin(res, mu)
     if quality in QUALITIES:
         if quality == "adversary_work" and scene.adversary is None:
             raise ValueError("quality 'adversary_work' needs an Adversary on the scene "
                              "(scene.replace(adversary=jsq.Adversary(s=..., push=...)))")
-        return getattr(Q, quality)
+        return {"squeeze_work": squeeze_work, "grip_force": grip_force, "adversary_work": adversary_work}[quality]
     raise ValueError(f"quality={quality!r}; choose one of {QUALITIES} or pass a function of a result.")
 
 
