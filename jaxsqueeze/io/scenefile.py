@@ -85,7 +85,6 @@ from typing import Any
 
 import numpy as np
 
-from ..simulation.laws import CONE_SLACK
 
 try:  # Python >= 3.11
     import tomllib
@@ -566,15 +565,13 @@ def _grip_distance(mesh, grip) -> float:
 def _check_cones(scene, key, precision: str = "float64"):
     """The segment between the grip nodes must lie in both friction cones.
 
-    One cone test (:func:`jaxsqueeze.simulation.laws.grip_feasible`, with numpy so no JAX
+    One cone test (:func:`jaxsqueeze.simulation.laws.grip_margin`, with numpy so no JAX
     array is created while loading), in one precision rule: the precision of the run, on the
     same scaled positions and normals the engine's operator holds (points / L). So a grip the
     squeeze would refuse in float32 is refused here, before any work.
     """
-    from ..simulation.laws import grip_cone_angles
+    from ..simulation.laws import grip_cone_angles, grip_half_angle, grip_margin
 
-    if scene.friction_model == "stick":          # full stick: the cones are half-planes
-        return
     dt = np.float32 if precision == "float32" else np.float64
     mesh = scene.mesh
     pos = {int(v): k for k, v in enumerate(np.asarray(scene.boundary_nodes()))}
@@ -585,18 +582,19 @@ def _check_cones(scene, key, precision: str = "float64"):
     Nb = N.astype(dt)
     p = np.stack([Pb[pos[i]], Pb[pos[j]]])
     inward = -np.stack([Nb[pos[i]], Nb[pos[j]]])
-    ang = np.degrees(grip_cone_angles(p, inward, xp=np).astype(np.float64))
-    phi = float(np.arctan(float(scene.friction))) if scene.friction_model == "coulomb" else 0.0
-    if np.any(ang > np.degrees(phi + CONE_SLACK)):
+    mu = float(scene.friction)
+    if grip_margin(p, inward, mu, scene.friction_model, xp=np) < 0:
+        ang = np.degrees(grip_cone_angles(p, inward, xp=np).astype(np.float64))
+        half = float(np.degrees(grip_half_angle(mu, scene.friction_model, xp=np)))
         hint = ""
-        if dt == np.float32 and np.all(ang <= np.degrees(phi) + 0.05):
+        if dt == np.float32 and np.all(ang <= half + 0.05):
             hint = (" The angles are within float32 round-off of the cone: with precision = \"float32\" this "
                     "grip cannot be told apart from one outside it; use accuracy.precision = \"float64\" or some "
                     "friction")
         raise SceneFileError(key, (
             f"grip nodes ({i}, {j}): the segment between them makes {ang[0]:.3g}° and {ang[1]:.3g}° with the "
-            f"inward normals, but the friction cones only allow {np.degrees(phi):.3g}° (squeeze.friction = "
-            f"{float(scene.friction):.3g}, friction_model = {scene.friction_model!r}, precision {precision}); "
+            f"inward normals, but the friction cones only allow {half:.3g}° (squeeze.friction = "
+            f"{mu:.3g}, friction_model = {scene.friction_model!r}, precision {precision}); "
             "choose more nearly opposite grip points or more friction." + hint))
 
 

@@ -105,3 +105,57 @@ def _deform(op: Compliance, slots, d):
         return Deformation(forces, g_si, None)
     F = jnp.zeros(op.G.shape[0], f_hat.dtype).at[dofs].set(f_hat)
     return Deformation(forces, g_si, field_displacement(op, F, g) * op.length)
+
+
+# ----------------------------------------------------------------------------- the factored contact set
+# The squeeze keeps the inverse of the bordered matrix M of eq. (4) over a fixed number S of
+# contact slots (DESIGN 2.4): an inactive slot has an identity block and no coupling, so its force
+# is 0. M changes only when a contact is made (event A) or broken (event B), and then in one
+# slot, so its inverse is updated in O(S^2) by bordering instead of being rebuilt in O(S^3):
+#
+#   activate slot k   M' = [[M, b], [b^T, c]] (k moved last):  with w = M^-1 b, Z = (c - b^T w)^-1,
+#                     M'^-1 = [[M^-1 + w Z w^T, -w Z], [-Z w^T, Z]]
+#   deactivate slot k M'^-1 (others) = P - q t^-1 q^T  for  M^-1 = [[P, q], [q^T, t]]
+#
+# (Schur complements of a 2x2 block). Both are exact; round-off grows at most linearly with
+# the number of updates (docs/numerics.md measures it).
+def inv2(a: jax.Array) -> jax.Array:
+    """Inverse of a (..., 2, 2) matrix (closed form; no LAPACK call, safe under ``vmap``)."""
+    det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    adj = jnp.stack([jnp.stack([a[..., 1, 1], -a[..., 0, 1]], -1), jnp.stack([-a[..., 1, 0], a[..., 0, 0]], -1)], -2)
+    return adj / det[..., None, None]
+
+
+def _block_rows(Minv, k, rows):
+    """Minv with rows 2k, 2k+1 replaced by ``rows`` (2, n) and columns 2k, 2k+1 by rows.T."""
+    Minv = jax.lax.dynamic_update_slice(Minv, rows, (2 * k, 0))
+    return jax.lax.dynamic_update_slice(Minv, rows.T, (0, 2 * k))
+
+
+def inverse_activate(Minv: jax.Array, k, b: jax.Array, c: jax.Array) -> jax.Array:
+    """Inverse of the bordered matrix after slot k becomes active.
+
+    Args:
+        Minv: (n, n) current inverse, slot k inactive (identity block, no coupling).
+        k: () slot index.
+        b: (n, 2) the new coupling of slot k's two DOFs to every row of M: compliance entries
+            at the other active slots, rigid-mode rows in the last three; zero at inactive
+            slots and at slot k itself.
+        c: (2, 2) compliance block of the node itself.
+    """
+    w = Minv @ b
+    Z = inv2(c - b.T @ w)
+    Minv = Minv + w @ Z @ w.T
+    rows = jax.lax.dynamic_update_slice(-(Z @ w.T), Z, (0, 2 * k))
+    return _block_rows(Minv, k, rows)
+
+
+def inverse_deactivate(Minv: jax.Array, k) -> jax.Array:
+    """Inverse of the bordered matrix after active slot k becomes inactive (identity block)."""
+    n = Minv.shape[0]
+    q = jax.lax.dynamic_slice(Minv, (0, 2 * k), (n, 2))
+    t = jax.lax.dynamic_slice(q, (2 * k, 0), (2, 2))
+    q = jax.lax.dynamic_update_slice(q, jnp.zeros((2, 2), q.dtype), (2 * k, 0))
+    Minv = Minv - q @ inv2(t) @ q.T
+    rows = jax.lax.dynamic_update_slice(jnp.zeros((2, n), Minv.dtype), jnp.eye(2, dtype=Minv.dtype), (0, 2 * k))
+    return _block_rows(Minv, k, rows)

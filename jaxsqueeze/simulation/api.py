@@ -28,13 +28,14 @@ from .status import Status
 
 
 # ----------------------------------------------------------------------------- scene → core inputs
-def config_of(scene: Scene) -> Config:
+def config_of(scene: Scene, history: bool = True) -> Config:
     s = scene.settings
     return Config(friction_model=scene.friction_model, contact=scene.contact,
                   rotation=scene.fingers.rotation is not None, capacity=int(s.capacity),
                   max_steps=int(s.max_steps), max_events=int(s.max_events),
                   newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
-                  placement=scene.placement is not None, adversary=scene.adversary is not None)
+                  placement=scene.placement is not None, adversary=scene.adversary is not None,
+                  history=history)
 
 
 def grasp_of(scene: Scene, op: Compliance) -> Grasp:
@@ -143,7 +144,8 @@ def _run(op: Compliance, grasp: Grasp, cfg: Config):
     return to_result(st, op, grasp), st.F.reshape(-1), st.g
 
 
-def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, trim: bool = True) -> SqueezeResult:
+def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, trim: bool = True,
+            history: bool = True) -> SqueezeResult:
     """Follow a two-finger squeeze from first touch to the target depth (Section IV).
 
     Args:
@@ -155,6 +157,9 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
             depth (``result.raise_for_status()``); only for eager calls.
         trim: eager calls return the valid rows only, as numpy arrays (see
             :class:`SqueezeResult`); ``False`` keeps the fixed-capacity padding.
+        history: record every row (default); ``False`` keeps two rows (the end of the
+            squeeze and the last row), what qualities need: a batch of grasps then carries a
+            few kilobytes per grasp instead of the whole history.
 
     Runs one compiled ``lax.while_loop``; a second call with new numbers (grip, friction,
     depth, radius, material, tolerances) reuses the compiled program. Works under ``jax.jit``,
@@ -171,7 +176,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     op = scene.operator() if op is None else op
     if concrete and scene.placement is None:
         check_grip(scene, op)
-    cfg = config_of(scene)
+    cfg = config_of(scene, history)
     grasp = grasp_of(scene, op)
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
@@ -187,19 +192,18 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
 
 def check_grip(scene: Scene, op: Compliance) -> None:
     """Raise ``ValueError`` if the segment between the initial contacts leaves either friction
-    cone (Section I-A; the test is :func:`laws.grip_cone_angles`, the one the engine runs)."""
+    cone (Section I-A; the test is :func:`laws.grip_margin`, the one the engine runs)."""
     g = np.asarray(scene.grip)
-    if g.ndim != 1 or scene.friction_model == "stick":   # full stick: the cones are half-planes
+    if g.ndim != 1:
         return
     k = boundary.positions(scene.boundary_nodes(), g)
     P, N = np.asarray(op.points, float), np.asarray(op.normals, float)
-    ang = laws.grip_cone_angles(P[k], -N[k], xp=np)
-    half = float(laws.friction_angle(float(scene.friction), scene.friction_model)) \
-        if scene.friction_model == "coulomb" else 0.0
-    if np.any(ang > half + laws.CONE_SLACK):
-        a, b = np.degrees(ang)
+    mu = float(scene.friction)
+    if laws.grip_margin(P[k], -N[k], mu, scene.friction_model, xp=np) < 0:
+        a, b = np.degrees(laws.grip_cone_angles(P[k], -N[k], xp=np))
+        half = np.degrees(float(laws.grip_half_angle(mu, scene.friction_model, xp=np)))
         raise ValueError(
             f"grip {tuple(int(v) for v in g)}: the segment between the two contacts makes {a:.3g}° and "
-            f"{b:.3g}° with the inward normals, but the friction cones only allow {np.degrees(half):.3g}° "
-            f"(mu={float(scene.friction):.3g}, friction_model={scene.friction_model!r}). Pick more nearly "
+            f"{b:.3g}° with the inward normals, but the friction cones only allow {half:.3g}° "
+            f"(mu={mu:.3g}, friction_model={scene.friction_model!r}). Pick more nearly "
             "opposite nodes (e.g. Scene.nearest_boundary_node) or raise the friction.")

@@ -13,6 +13,10 @@ MODE_NAMES = {FREE: "free", STICK: "stick", SLIP_POS: "slip+", SLIP_NEG: "slip-"
 EVENT_KINDS = "ABCD"                           # new contact, break, stick→slip, slip→stick
 EVENT_MEANING = {"A": "new contact", "B": "contact break", "C": "stick to slip", "D": "slip to stick"}
 CONE_SLACK = 1e-7   # [rad] a force this close to its cone edge counts as inside (round-off)
+#: [rad] frictionless grips: how far the line through the two grip nodes (along which the
+#: fingertips are placed) may turn from the nodes' inward normals; a fingertip then dips at most
+#: 1e-3 of its radius below a flat face (cos(tilt) = 1 - 1e-3)
+FRICTIONLESS_TILT = float(np.arccos(1.0 - 1e-3))
 FRICTION_MODELS = ("coulomb", "frictionless", "stick")
 CONTACT_MODELS = ("segment", "point")
 
@@ -54,11 +58,25 @@ def grip_cone_angles(p, inward, xp=jnp):
     return xp.arccos(xp.clip(c, -1.0, 1.0))
 
 
-def grip_feasible(p, inward, phi, xp=jnp):
-    """True when the segment between the two contacts lies inside both friction cones."""
-    return xp.all(grip_cone_angles(p, inward, xp) <= phi + CONE_SLACK, axis=-1)
+def grip_half_angle(mu, friction_model: str, xp=jnp):
+    """The largest angle [rad] the segment between the two initial contacts may make with their
+    inward normals (Section I-A): the friction angle atan(μ) for Coulomb friction, π/2 for full
+    stick (only pushing is needed), and ``FRICTIONLESS_TILT`` frictionless (the fingertips then
+    sit on the segment's line, so the initial forces are along it)."""
+    mu = xp.asarray(mu)
+    if friction_model == "coulomb":
+        return xp.arctan(mu)
+    return xp.full_like(mu, 0.5 * np.pi if friction_model == "stick" else FRICTIONLESS_TILT)
+
+
+def grip_margin(p, inward, mu, friction_model: str, xp=jnp):
+    """The grip's smooth feasibility margin [rad] (> 0 feasible, 0 on the edge within
+    ``CONE_SLACK``): :func:`grip_half_angle` + slack − the larger of :func:`grip_cone_angles`.
+    The one feasibility test of an initial grip: the engine (traced), the squeeze's eager check
+    and the scene-file loader all call it."""
+    return grip_half_angle(mu, friction_model, xp) + CONE_SLACK - xp.max(grip_cone_angles(p, inward, xp), axis=-1)
 
 
 __all__ = ["FREE", "STICK", "SLIP_POS", "SLIP_NEG", "MODE_NAMES", "EVENT_KINDS", "EVENT_MEANING", "CONE_SLACK",
-           "FRICTION_MODELS", "CONTACT_MODELS", "friction_angle", "cone_margin", "grip_cone_angles",
-           "grip_feasible"]
+           "FRICTION_MODELS", "CONTACT_MODELS", "FRICTIONLESS_TILT", "friction_angle", "cone_margin",
+           "grip_cone_angles", "grip_half_angle", "grip_margin"]

@@ -83,6 +83,12 @@ class SqueezeResult:
         infeasible (−π when a placed finger cannot touch the object).
     squeeze_status: () the status the squeeze phase ended with (``status`` is the final one,
         after the adversary push when there is one).
+    push_work: (3,) work during the adversary push [J]: done by the pusher on the object, and
+        resisted by finger 0 and by finger 1 (trapezoid rule over the recorded rows; zeros
+        without an adversary). See :mod:`jaxsqueeze.plan.quality`.
+
+    A result computed with ``history=False`` (what grasp maps use) holds two rows: row 0 the
+    last squeeze-phase row, row 1 the last row; ``stats`` still counts every step and event.
     """
 
     status: jax.Array
@@ -108,6 +114,7 @@ class SqueezeResult:
     push: jax.Array
     margin: jax.Array
     squeeze_status: jax.Array
+    push_work: jax.Array
 
     @property
     def outcome(self) -> Status:
@@ -174,7 +181,7 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     with the last valid row; the full displacement field is left to the caller (None)."""
     L, Fs = op.length, op.force_scale
     depth, mode, finger, theta, F, u, C, alpha, g, push = st.hist
-    k = st.count
+    k = jnp.minimum(st.count, depth.shape[0])
     rows = jnp.arange(depth.shape[0])
     last = jnp.minimum(rows, k - 1)                  # pad with the last valid row
     pad = lambda a: a[last]  # noqa: E731
@@ -187,7 +194,7 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
         g=st.g * gs, count=k, n_events=st.n_ev, nodes=op.nodes,
         grip=op.nodes[st.grip], radius=grasp.radius,
         stats=st.stats, invalid=grasp.invalid, push=pad(push) * L, margin=st.margin,
-        squeeze_status=st.squeeze_status)
+        squeeze_status=st.squeeze_status, push_work=st.work * Fs * L)
 
 
 HISTORY = ("depth", "modes", "finger", "theta", "forces", "boundary_displacement", "centres", "alpha", "rigid",

@@ -1,0 +1,411 @@
+"""One contact configuration: the contact set in fixed slots with its factored bordered matrix,
+and the solve at one depth (Section IV-A; DESIGN 2.1, 2.4, 2.10).
+
+The contact set lives in ``capacity`` slots (:class:`Slots`). A slot holds one boundary node and
+its two DOFs of the bordered system (eq. 4); an empty slot has an identity block, so its force
+is 0. The inverse of the bordered matrix is kept with the slots and updated by bordering when a
+contact is made or broken (:func:`~jaxsqueeze.mechanics.bordered.inverse_activate`), never
+rebuilt, so a squeeze step costs O(S^2), not O(S^3).
+
+:func:`solve` evaluates a configuration at a depth d: the prescribed positions of the contact
+nodes on the fingertips, the slip angles of sliding nodes (system S, eq. 6, by Newton with the
+Jacobian from ``jax.jacobian``, and its implicit derivative dθ/dε), the forces and the rigid
+part g, the boundary displacements and every event function. Everything is a pure function of
+the model, the slots, the per-node contact state and d, so ``jax.jvp`` over d gives the rates
+the event location uses.
+
+Three contact laws, compiled by ``Config.friction_model`` (DESIGN 2.7):
+
+* ``coulomb``: a sticking node stays at its anchor angle θ0 on its fingertip; a sliding node
+  moves along the fingertip circle with its force on one cone edge (eq. 6).
+* ``stick``: every contact sticks; no Newton solve, no slip events.
+* ``frictionless``: every contact slides with its force along the fingertip radius; the
+  object's indeterminate drift and spin are held by a stated rule (:func:`_slip_angles`,
+  ``docs/numerics.md`` §5.1).
+
+Units are scaled (DESIGN 2.3).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from ..geometry import boundary
+from ..mechanics import linalg
+from ..mechanics.bordered import inverse_activate, inverse_deactivate, slot_dofs
+from ..mechanics.operator import Compliance
+from . import laws
+from .laws import FREE, SLIP_NEG, SLIP_POS, STICK
+from .model import Model, gap_to_fingers
+
+#: the rule that holds a frictionless object's indeterminate drift and spin: the weight of
+#: ½|ĝ⊥|² relative to the mean contact stiffness (:func:`_slip_angles`)
+NEUTRAL_REG = 1e-2
+#: sliding slots solved in a compact system of this size when they fit (else all S slots)
+COMPACT = 16
+
+
+def unit(a):
+    return jnp.stack([jnp.cos(a), jnp.sin(a)], axis=-1)
+
+
+def cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+# ----------------------------------------------------------------------------- the contact set
+class Slots(NamedTuple):
+    """The contact set in S fixed slots (DESIGN 2.4).
+
+    node: (S,) int32 boundary position of each slot's node, −1 for an empty slot.
+    Minv: (2S + 3, 2S + 3) inverse of the bordered matrix of eq. (4) over the slots (empty
+        slots: identity block).
+    Gc: (2m, 2S) compliance columns G[:, slot DOFs] (zero for empty slots): the boundary
+        displacement under slot forces is Gc f + N g.
+    """
+
+    node: jax.Array
+    Minv: jax.Array
+    Gc: jax.Array
+
+    @property
+    def active(self):
+        return self.node >= 0
+
+
+def _dofs(pos):
+    return jnp.stack([2 * pos, 2 * pos + 1])
+
+
+def pair(op: Compliance, S: int, i, j) -> Slots:
+    """Slots 0 and 1 holding boundary positions i and j (the first touch), the rest empty.
+
+    The 7 × 7 bordered matrix of the pair is nonsingular by Theorem 3 (s = 2); it is inverted
+    directly and embedded in the identity of the empty slots.
+    """
+    dt = op.G.dtype
+    n = 2 * S + 3
+    d4 = jnp.concatenate([_dofs(i), _dofs(j)])
+    A = op.G[d4][:, d4]
+    B = op.N[d4]
+    M7 = jnp.block([[A, B], [B.T, jnp.zeros((3, 3), dt)]])
+    inv7 = linalg.solve(M7, jnp.eye(7, dtype=dt))
+    where = jnp.array([0, 1, 2, 3, 2 * S, 2 * S + 1, 2 * S + 2])
+    Minv = jnp.eye(n, dtype=dt).at[2 * S:, 2 * S:].set(0.0).at[where[:, None], where[None, :]].set(inv7)
+    Gc = jnp.zeros((op.G.shape[0], 2 * S), dt).at[:, :4].set(op.G[:, d4])
+    node = jnp.full(S, -1, jnp.int32).at[0].set(i).at[1].set(j)
+    return Slots(node, Minv, Gc)
+
+
+def activate(op: Compliance, sl: Slots, k, pos) -> Slots:
+    """Slot k (empty) takes boundary position ``pos``: the inverse updated by bordering."""
+    d = _dofs(pos)
+    b = jnp.concatenate([sl.Gc[d].T, op.N[d].T], axis=0)          # (2S + 3, 2)
+    Minv = inverse_activate(sl.Minv, k, b, op.G[d][:, d])
+    Gc = lax.dynamic_update_slice(sl.Gc, op.G[:, d], (0, 2 * k))
+    return Slots(sl.node.at[k].set(pos), Minv, Gc)
+
+
+def deactivate(sl: Slots, k) -> Slots:
+    """Slot k (active) is emptied: the inverse downdated by the Schur complement."""
+    Gc = lax.dynamic_update_slice(sl.Gc, jnp.zeros((sl.Gc.shape[0], 2), sl.Gc.dtype), (0, 2 * k))
+    return Slots(sl.node.at[k].set(-1), inverse_deactivate(sl.Minv, k), Gc)
+
+
+def update(op: Compliance, sl: Slots, old_on, new_on):
+    """Slots for the contact set ``new_on`` (m,) bool, from the slots of ``old_on``: every node
+    that left is deactivated and every node that joined takes the first empty slot, one update
+    each. Returns (slots, overflow): overflow when a joining node found no empty slot (it is
+    then left out, and the caller reports ``Status.OVERFLOW``)."""
+    m = old_on.shape[0]
+    leave = old_on & ~new_on
+    join = new_on & ~old_on
+
+    def cond(c):
+        _, leave, join, _ = c
+        return jnp.any(leave) | jnp.any(join)
+
+    def body(c):
+        sl, leave, join, over = c
+
+        def drop():
+            p = jnp.argmax(leave)
+            return deactivate(sl, jnp.argmax(sl.node == p)), leave.at[p].set(False), join, over
+
+        def add():
+            p = jnp.argmax(join)
+            free = sl.node < 0
+            k = jnp.argmax(free)
+            sl2 = lax.cond(jnp.any(free), lambda: activate(op, sl, k, p), lambda: sl)
+            return sl2, leave, join.at[p].set(False), over | ~jnp.any(free)
+
+        return lax.cond(jnp.any(leave), drop, add)
+
+    sl, _, _, over = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False)))
+    del m
+    return sl, over
+
+
+# ----------------------------------------------------------------------------- one configuration
+class Nodes(NamedTuple):
+    """The per-node contact state (m,): mode (``laws`` FREE/STICK/SLIP_POS/SLIP_NEG), finger,
+    theta (the anchor angle of a sticking node and the current angle of a sliding one, finger
+    frame; for frictionless contacts the world-frame normal angle where the node touched) and
+    armed (event D may fire, see :func:`engine._arm`)."""
+
+    mode: jax.Array
+    finger: jax.Array
+    theta: jax.Array
+    armed: jax.Array
+
+
+class Solution(NamedTuple):
+    """A configuration solved at one depth (scaled units).
+
+    th: (S,) polar angle of each slot's node about its fingertip centre, finger frame.
+    f: (S, 2) slot forces; g: (3,) rigid part; ok: () Newton converged.
+    u, F: (m, 2) boundary displacements and forces.
+    e: (m,) event functions (an event has happened where e < 0); kind: (m,) 0–3 for A–D.
+    fn, ft: (m,) normal (pushing > 0) and tangential force of contact nodes.
+    rate: (m,) slip rate s·dθ/dε of sliding nodes (0 elsewhere).
+    gap: (m,) gap of every node to its nearest fingertip.
+    iters: () Newton iterations; resid: () last Newton update [rad].
+    drift: (2,) the rigid drift across the squeeze line and spin ĝ⊥ (frictionless; else 0).
+    """
+
+    th: jax.Array
+    f: jax.Array
+    g: jax.Array
+    ok: jax.Array
+    u: jax.Array
+    F: jax.Array
+    e: jax.Array
+    kind: jax.Array
+    fn: jax.Array
+    ft: jax.Array
+    rate: jax.Array
+    gap: jax.Array
+    iters: jax.Array
+    resid: jax.Array
+    drift: jax.Array
+
+
+class _View(NamedTuple):
+    """The per-node state gathered into the slots."""
+
+    idx: jax.Array      # (S,) node positions (0 for empty slots)
+    active: jax.Array   # (S,)
+    mode: jax.Array     # (S,) FREE for empty slots
+    finger: jax.Array
+    theta0: jax.Array
+    armed: jax.Array
+
+
+def _view(sl: Slots, ns: Nodes) -> _View:
+    act = sl.active
+    idx = jnp.where(act, sl.node, 0)
+    return _View(idx, act, jnp.where(act, ns.mode[idx], FREE), ns.finger[idx], ns.theta[idx], ns.armed[idx])
+
+
+def _linear(model: Model, sl: Slots, v: _View, p):
+    """Slot forces (S, 2) and g (3,) for prescribed slot displacements p (S, 2) (eq. 4)."""
+    S = v.idx.shape[0]
+    z = sl.Minv[:, : 2 * S] @ jnp.where(v.active[:, None], p, 0.0).reshape(-1)
+    return z[: 2 * S].reshape(S, 2), z[2 * S:]
+
+
+def _block_form(sl: Slots, S: int):
+    """P (S, 2, S, 2): the slot-force block of the inverse, f_k = Σ_j P[k, :, j, :] p_j."""
+    return sl.Minv[: 2 * S, : 2 * S].reshape(S, 2, S, 2)
+
+
+def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
+    """Slot angles θ (S,): anchors for sticking slots, system S (eq. 6) for sliding ones, by
+    Newton. Returns (θ, ok, iterations, last update, dθ/dε (S,), ĝ⊥ (2,)).
+
+    Newton's Jacobian is assembled from ``jax.jacobian`` of the per-slot laws by the chain rule
+    through the exact linear map f = P p (O(S²) instead of S forward passes through P):
+    ∂R_k/∂θ_j = ∂φ_k/∂f_k · P_kj · ∂p_j/∂θ_j + δ_kj ∂φ_k/∂θ_k. The converged angles are
+    differentiated implicitly: the loop runs on constants, and one Newton step from its result,
+    taken on the traced inputs, carries exactly the implicit-function tangent −J⁻¹ ∂R (at
+    convergence the step itself is below the tolerance). dθ/dε = −J⁻¹ ∂R/∂ε the same way.
+
+    Frictionless contacts slide with their force along the radius (φ = 0). Their equilibrium is
+    the stationary point of the strain energy E(θ) over the contact angles; where the object's
+    position is indeterminate (a drift along flat faces, a disk's spin) E is flat or, with
+    material points pinned to the tips, slightly concave, and the stated rule holds it: the
+    stationary point of E + ½ ε |ĝ⊥ − ``hold``|², ĝ⊥ the rigid drift across the squeeze line
+    and the spin of the motion (the least-squares rigid fit of the boundary displacement),
+    ``hold`` its value where the contact set last changed or a row was accepted (a weak spring
+    re-anchored there, so a node that joins feels no force from it),
+    ε = ``NEUTRAL_REG`` × the mean contact stiffness (``docs/numerics.md`` §5.1).
+
+    The unknowns are only the sliding slots: gathered into ``COMPACT`` positions when they fit
+    (a 16 × 16 system instead of S × S), all S slots otherwise.
+    """
+    S = v.idx.shape[0]
+    cfg = model.cfg
+    sliding = v.active & (v.mode >= SLIP_POS)
+    zero = jnp.zeros((), v.theta0.dtype)
+    if cfg.friction_model == "stick":
+        return v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0), jnp.zeros(2, zero.dtype)
+    held = cfg.friction_model == "frictionless"
+
+    def prescribed_k(th, c, r, a):
+        return c + r * unit(th + a)
+
+    def law_k(f, th, a, s, phi):       # eq. (6): the force on the cone edge θ + α − s φ
+        return cross2(f, unit(th + a - s * phi))
+
+    # the rule of frictionless contacts: ĝ⊥ = K p (2,) for slot displacements p, and its weight
+    K = eps = None
+    if held:
+        N = model.op.N
+        fit = jnp.linalg.solve(N.T @ N, N.T @ sl.Gc) @ sl.Minv[: 2 * S, : 2 * S] + sl.Minv[2 * S:, : 2 * S]
+        e = model.axis
+        K = jnp.stack([-e[1] * fit[0] + e[0] * fit[1], fit[2]]).reshape(2, S, 2)
+        P = _block_form(sl, S)
+        eps = NEUTRAL_REG * jnp.sum(jnp.where(v.active, jnp.einsum("kaka->k", P), 0.0)) / \
+            jnp.maximum(2 * jnp.sum(v.active), 1)
+
+    def solve_for(sel, mask):
+        """Newton on the slots ``sel`` (Q,) whose ``mask`` is set; the others stay at θ0."""
+        take = lambda a: jnp.take(a, sel, axis=0, mode="clip")  # noqa: E731
+
+        def angles(x, v):
+            return v.theta0.at[sel].set(jnp.where(mask, x, take(v.theta0)), mode="drop")
+
+        def system(x, m, sl, v, dd, Psel, K, eps, hold):
+            """(R (Q,), J (Q, Q)) of system S at the unknowns x."""
+            th = angles(x, v)
+            C = m.centres(dd)[v.finger]
+            r = m.r[v.finger]
+            a = m.angles(dd)[v.finger]
+            p = jnp.where(v.active[:, None], jax.vmap(prescribed_k)(th, C, r, a) - m.op.points[v.idx], 0.0)
+            f, _ = _linear(m, sl, v, p)
+            sign = jnp.where(v.mode == SLIP_POS, 1.0, -1.0)
+            phi = jnp.broadcast_to(m.phi, th.shape)
+            f, th, C, r, a, sign, phi = map(take, (f, th, C, r, a, sign, phi))
+            R = jax.vmap(law_k)(f, th, a, sign, phi)
+            dp = jax.vmap(jax.jacobian(prescribed_k))(th, C, r, a)                          # (Q, 2)
+            dlf, dlt = jax.vmap(jax.jacobian(law_k, argnums=(0, 1)))(f, th, a, sign, phi)   # (Q, 2), (Q,)
+            J = jnp.einsum("ka,kajb,jb->kj", dlf, Psel, dp) + jnp.diag(dlt)
+            if held:      # the gradient of ½ ε |ĝ⊥ − hold|² over r·θ, added to the tangential balance
+                g = jnp.einsum("gkb,kb->g", K, p) - hold
+                Ks = jnp.take(K, sel, axis=1, mode="clip")
+                H = jnp.einsum("gkb,kb->gk", Ks, dp)
+                d2p = jax.vmap(jax.jacobian(jax.jacobian(prescribed_k)))(th, C, r, a)
+                w = eps / r
+                R = R - w * (g @ H)
+                J = J - w[:, None] * (H.T @ H + jnp.diag(g @ jnp.einsum("gkb,kb->gk", Ks, d2p)))
+            R = jnp.where(mask, R, x - take(v.theta0))
+            return R, jnp.where(mask[:, None], J, 0.0) + jnp.diag(jnp.where(mask, 0.0, 1.0))
+
+        Psel = jnp.take(jnp.take(_block_form(sl, S), sel, axis=0, mode="clip"), sel, axis=2, mode="clip")
+        args = (model, sl, v, d, Psel, K, eps, hold)
+        consts = lax.stop_gradient(args)
+        tol = consts[0].newton_tol
+
+        def cond(c):
+            return (c[1] < cfg.newton_iters) & (c[2] > tol)
+
+        def body(c):
+            x, it, _ = c
+            R, J = system(x, *consts)
+            dx = linalg.solve(J, R)
+            return x - dx, it + 1, jnp.max(jnp.abs(dx))
+
+        start = jnp.where(jnp.any(mask), jnp.array(jnp.inf, zero.dtype), zero)
+        x_c, it, last = lax.while_loop(cond, body, (take(consts[2].theta0), jnp.array(0, jnp.int32), start))
+        # the implicit-function step (see the docstring), then dθ/dε at the solution: its
+        # Jacobian has the value at x_c but the tangent of x, so d(dθ/dε)/dε is exact too
+        R, J = system(x_c, *args)
+        x = x_c - linalg.solve(J, R)
+        rate = jnp.zeros_like(v.theta0)
+        if cfg.slip_events:
+            _, J_t = system(_value_and_tangent(x_c, x), *args)
+            _, R_eps = jax.jvp(lambda dd: system(x, *args[:3], dd, *args[4:])[0], (d,), (jnp.ones_like(d),))
+            rate = rate.at[sel].set(jnp.where(mask, -linalg.solve(J_t, R_eps), 0.0), mode="drop")
+        th = angles(x, v)
+        drift = jnp.zeros(2, zero.dtype)
+        if held:
+            C, r, a = model.centres(d)[v.finger], model.r[v.finger], model.angles(d)[v.finger]
+            p = jnp.where(v.active[:, None], jax.vmap(prescribed_k)(th, C, r, a) - model.op.points[v.idx], 0.0)
+            drift = jnp.einsum("gkb,kb->g", K, p)
+        return th, last <= tol, it, last, rate, drift
+
+    n = jnp.sum(sliding)
+    still = lambda: (v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0),  # noqa: E731
+                     jnp.zeros(2, zero.dtype))
+    full = lambda: solve_for(jnp.arange(S), sliding)  # noqa: E731
+    if S <= COMPACT:
+        return lax.cond(n > 0, full, still)
+    compact = lambda: solve_for(jnp.nonzero(sliding, size=COMPACT, fill_value=S)[0], jnp.arange(COMPACT) < n)  # noqa: E731
+    return lax.switch(jnp.where(n == 0, 0, jnp.where(n <= COMPACT, 1, 2)), [still, compact, full])
+
+
+@jax.custom_jvp
+def _value_and_tangent(a, b):
+    """a, carrying the tangent of b (same shape)."""
+    return a
+
+
+@_value_and_tangent.defjvp
+def _value_and_tangent_jvp(primals, tangents):
+    return primals[0], tangents[1]
+
+
+def solve(model: Model, sl: Slots, ns: Nodes, d, hold=None) -> Solution:
+    """Solve the configuration (slots, per-node state) at depth ``d`` and evaluate every event
+    function (Section IV-B):
+
+    * A (free nodes): gap to the nearest fingertip + ``gap_tol`` (segment contacts only);
+    * B (contacts): the normal force;
+    * C (sticking nodes): the cone margin (:func:`laws.cone_margin`);
+    * D (sliding nodes whose rate was consistent once): the slip rate s·dθ/dε.
+    """
+    op, m, cfg = model.op, model.op.m, model.cfg
+    v = _view(sl, ns)
+    S = v.idx.shape[0]
+    alpha = model.angles(d)[v.finger]
+    C = model.centres(d)[v.finger]
+    r = model.r[v.finger]
+    rate = jnp.zeros_like(v.theta0)
+    iters, resid, ok = jnp.array(0, jnp.int32), jnp.zeros((), v.theta0.dtype), jnp.array(True)
+    hold = jnp.zeros(2, v.theta0.dtype) if hold is None else hold
+    th, ok, iters, resid, rate, drift = _slip_angles(model, sl, v, d, hold)
+    p = C + r[:, None] * unit(th + alpha) - op.points[v.idx]
+    axis = unit(th + alpha)                # cone axis: from the tip centre to the node
+    f, g = _linear(model, sl, v, p)
+    f = jnp.where(v.active[:, None], f, 0.0)
+    u = (sl.Gc @ f.reshape(-1) + op.N @ g).reshape(m, 2)
+    safe = jnp.where(v.active, v.idx, m)
+    F = jnp.zeros((m, 2), f.dtype).at[safe].set(f, mode="drop")
+
+    x = op.points + u
+    gaps = jnp.min(gap_to_fingers(model, x, d), axis=1)
+    eA = gaps + model.gap_tol
+    if cfg.contact == "point":
+        eA = jnp.full_like(eA, jnp.inf)
+        # a point contact (Section V-A) has the object's own deformed surface normal as its cone
+        # axis: it turns as the band bends (Fig. 3), while the node stays put on the tip
+        axis = -boundary.normals(x, op.loops)[v.idx]
+    fn = jnp.sum(f * axis, -1)
+    ft = cross2(axis, f)                   # f · t, t the axis turned by +90°
+    srate = jnp.where(v.mode == SLIP_POS, 1.0, jnp.where(v.mode == SLIP_NEG, -1.0, 0.0)) * rate
+    if cfg.slip_events:
+        margin = laws.cone_margin(model.phi, fn, ft)
+        other = jnp.where(v.mode == STICK, margin, jnp.where(v.armed, srate, jnp.inf))
+        e_slot = jnp.minimum(fn, other)
+        k_slot = jnp.where(fn < other, 1, jnp.where(v.mode == STICK, 2, 3))
+    else:
+        e_slot, k_slot = fn, jnp.ones_like(v.mode)
+    e = eA.at[safe].set(e_slot, mode="drop")
+    kind = jnp.zeros(m, jnp.int32).at[safe].set(k_slot, mode="drop")
+    put = lambda a: jnp.zeros(m, f.dtype).at[safe].set(a, mode="drop")  # noqa: E731
+    e = jnp.where((ns.mode == FREE) | (kind > 0), e, jnp.inf)
+    del S
+    return Solution(th, f, g, ok, u, F, e, kind, put(fn), put(ft), put(srate), gaps, iters, resid, drift)

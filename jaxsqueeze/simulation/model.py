@@ -1,0 +1,247 @@
+"""What stays fixed during one loading phase of a squeeze: static configuration, traced grasp
+numbers and the finger kinematics (Section IV, IV-D; DESIGN 2.4, 2.7, 2.9).
+
+Units inside are scaled (DESIGN 2.3): lengths / L, forces / (E h L).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+
+from ..geometry import boundary
+from ..mechanics.operator import Compliance
+from . import laws
+
+
+# ----------------------------------------------------------------------------- configuration
+@dataclass(frozen=True)
+class Config:
+    """Static configuration: which effects are compiled in (DESIGN 2.7) and capacities."""
+
+    friction_model: str = "coulomb"   # "coulomb" | "frictionless" | "stick"
+    contact: str = "segment"          # "segment" | "point"
+    rotation: bool = False
+    capacity: int = 64
+    max_steps: int = 400
+    max_events: int = 256
+    newton_iters: int = 30
+    bisect_iters: int = 40
+    placement: bool = False           # fingers placed by arc length (an approach finds first touch)
+    adversary: bool = False           # a third finger pushes after the squeeze (a second phase)
+    history: bool = True              # record every row; False keeps two (end of squeeze, last)
+
+    @property
+    def rows(self) -> int:
+        """Rows of the recorded history."""
+        return self.max_steps + 1 if self.history else 2
+
+    @property
+    def fingers(self) -> int:
+        return 3 if self.adversary else 2
+
+    @property
+    def newton(self) -> bool:
+        return self.friction_model != "stick"
+
+    @property
+    def slip_events(self) -> bool:   # events C and D
+        return self.friction_model == "coulomb"
+
+
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class Grasp:
+    """Traced grasp parameters in SI units (they become scaled inside :func:`simulate`).
+
+    grip: (2,) int positions of the two grip nodes among the operator's nodes (ignored when
+        ``placement`` is given: the approach finds the first-touch nodes).
+    radius: fingertip radius [m]; mu: friction coefficient; depth: target depth [m];
+    step: squeeze step [m]; event_tol: event bracket width [m]; newton_tol: [rad];
+    gap_tol: penetration tolerance [m]; rotation: (2, k) polynomial coefficients of α_i(d).
+    invalid: () int32 index of the first invalid input (``validate.FIELDS``), -1 when valid.
+    """
+
+    grip: jax.Array
+    radius: jax.Array
+    mu: jax.Array
+    depth: jax.Array
+    step: jax.Array
+    event_tol: jax.Array
+    newton_tol: jax.Array
+    gap_tol: jax.Array
+    rotation: jax.Array
+    invalid: jax.Array
+    placement: tuple = ()     # (s (2,) [m], angle () [rad]) when placed by arc length
+    adversary: tuple = ()     # (s () [m], angle () [rad], radius () [m], push () [m], step () [m])
+    curve: tuple = ()         # boundary.Curve of the outer loop [m], when placed or pushed
+
+
+def unit(a):
+    return jnp.stack([jnp.cos(a), jnp.sin(a)], axis=-1)
+
+
+def cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class Model:
+    """Everything fixed during one loading phase, in scaled units (lengths / L). A pytree: the
+    configuration is static, everything else an array leaf.
+
+    The fingertip centres move linearly with the phase's load parameter λ (the squeeze depth
+    d in the squeeze phase, the push displacement in the adversary phase):
+    ``centres(λ) = base + λ · dirn``. Finger 0 is still, finger 1 squeezes, finger 2 (when
+    ``cfg.adversary``) pushes.
+    """
+
+    op: Compliance
+    cfg: Config = dataclasses.field(metadata=dict(static=True))
+    base: jax.Array      # (F, 2) centres at λ = 0
+    dirn: jax.Array      # (F, 2) centre velocity per unit λ
+    present: jax.Array   # (F,) bool: the finger takes part in contact in this phase
+    r: jax.Array         # (F,) radii
+    phi: jax.Array       # friction angle atan(mu)
+    mu: jax.Array
+    L: jax.Array
+    rotation: jax.Array  # (2, k), SI
+    rot_depth: jax.Array  # (2,): the depth at λ is rot_depth[0] + rot_depth[1] λ (rotation schedule)
+    grip: jax.Array      # (2,) boundary positions of the first contacts (clipped to a valid index)
+    D: jax.Array         # target of λ
+    h: jax.Array         # step of λ
+    ev_tol: jax.Array    # event bracket width
+    newton_tol: jax.Array  # [rad]
+    gap_tol: jax.Array
+    eta: jax.Array       # probe offset past an event (stick-first hypothesis test)
+    invalid: jax.Array   # () int32: index of the first invalid input (-1: all valid)
+    margin: jax.Array    # () smooth feasibility margin of the grip [rad] (> 0 feasible)
+    phase: jax.Array     # () int32: 0 squeeze, 1 adversary push
+    axis: jax.Array      # (2,) the squeeze direction (unit, finger 1's motion in the squeeze phase)
+
+    def centres(self, d):
+        return self.base + d * self.dirn
+
+    def angles(self, d):
+        F = self.cfg.fingers
+        if not self.cfg.rotation:
+            return jnp.zeros(F, self.r.dtype)
+        a = jax.vmap(jnp.polyval, (0, None))(self.rotation, (self.rot_depth[0] + self.rot_depth[1] * d) * self.L)
+        return jnp.concatenate([a, jnp.zeros(F - 2, a.dtype)])
+
+
+def first_touch(x, o, v, r, present=True):
+    """Where a circle of radius r moving along the unit direction v (from far behind) first
+    touches one of the points x (m, 2): (t, k) with the centre at o + t v at touch and k the
+    touched point; t = +inf when the circle's path misses every point. This is event A's gap
+    function solved along the approach (the object is rigid before first touch)."""
+    w = x - o
+    b = w @ v
+    disc = b * b - jnp.sum(w * w, axis=1) + r * r
+    t = jnp.where(disc > 0, b - jnp.sqrt(jnp.where(disc > 0, disc, 1.0)), jnp.inf)
+    t = jnp.where(present, t, jnp.inf)
+    k = jnp.argmin(t)
+    return t[k], k
+
+
+def gap_to_fingers(model: Model, x, d):
+    """(m, F) gap of points x (m, 2) to each fingertip circle at λ = d (+inf for absent fingers)."""
+    g = jnp.linalg.norm(x[:, None, :] - model.centres(d)[None], axis=-1) - model.r
+    return jnp.where(model.present, g, jnp.inf)
+
+
+def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
+    """The squeeze phase's model: finger centres from the grip nodes (each one radius out along
+    the node's normal, squeezing along the line between the nodes), or from a continuous
+    placement (each touching the smooth boundary at p(s_i), squeezing along
+    p(s_0) − p(s_1) turned by the angle offset, then closed in along that line until each
+    first touches a node). Frictionless fingertips sit on the line through their two first
+    contacts instead, so the initial forces, radial on the tips, are along it."""
+    L = op.length
+    dt = op.G.dtype
+    F = cfg.fingers
+    r = jnp.full(F, grasp.radius / L, dt)
+    mu = jnp.asarray(grasp.mu, dt)
+    phi = jnp.arctan(mu) if cfg.friction_model == "coulomb" else jnp.zeros_like(mu)
+    touches = jnp.array(True)
+    if cfg.placement:
+        s, angle = grasp.placement
+        q, n = boundary.point(_scaled_curve(grasp.curve, L), jnp.asarray(s, dt) / L)
+        e0 = (q[0] - q[1]) / jnp.linalg.norm(q[0] - q[1])
+        ca, sa = jnp.cos(angle), jnp.sin(angle)
+        e = jnp.array([ca * e0[0] - sa * e0[1], sa * e0[0] + ca * e0[1]])
+        o = q + r[:2, None] * n
+        t0, k0 = first_touch(op.points, o[0], -e, r[0])
+        t1, k1 = first_touch(op.points, o[1], e, r[1])
+        touches = jnp.isfinite(t0) & jnp.isfinite(t1) & (k0 != k1)
+        t0, t1 = jnp.where(touches, t0, 0.0), jnp.where(touches, t1, 0.0)
+        o = jnp.stack([o[0] - t0 * e, o[1] + t1 * e])
+        grip = jnp.stack([k0, k1])
+    else:
+        grip = jnp.clip(grasp.grip, 0, op.m - 1)      # an invalid grip is reported, never silently used
+        o = op.points[grip] + r[:2, None] * op.normals[grip]
+    p = op.points[grip]
+    if not cfg.placement:
+        e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
+    if cfg.friction_model == "frictionless":
+        e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
+        o = p + r[:2, None] * jnp.stack([e, -e])
+    # smooth feasibility margin (Section I-A), −π when a placed finger cannot touch the object
+    margin = jnp.where(touches, laws.grip_margin(p, -op.normals[grip], mu, cfg.friction_model), -jnp.pi)
+    base = jnp.zeros((F, 2), dt).at[:2].set(o)
+    dirn = jnp.zeros((F, 2), dt).at[1].set(e)
+    present = jnp.arange(F) < 2
+    h = grasp.step / L
+    eta = jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps)   # probe offset, above round-off in float32
+    return Model(op, cfg, base, dirn, present, r, phi, mu, L, jnp.asarray(grasp.rotation, dt),
+                 jnp.array([0.0, 1.0], dt), grip, grasp.depth / L, h, grasp.event_tol / L, grasp.newton_tol,
+                 grasp.gap_tol / L, eta, jnp.asarray(grasp.invalid, jnp.int32), margin, jnp.array(0, jnp.int32), e)
+
+
+def _scaled_curve(c, L):
+    """A curve in metres as one in scaled lengths (knots / L; coefficients of t^k scale as L^(1-k))."""
+    return boundary.Curve(jnp.asarray(c.knots) / L, jnp.asarray(c.coef) * (L ** (2.0 - jnp.arange(4)))[None, :, None])
+
+
+def push_model(model: Model, grasp: Grasp, st) -> Model:
+    """The adversary phase's model, from the squeeze model and its final state: the grasping
+    fingers hold still at the final depth, and a third fingertip, placed on the smooth boundary
+    at arc length s and closed in along its push direction (the inward normal turned by the
+    angle offset) until it touches the deformed object, pushes by λ along that direction.
+    The pushed point is the material point at arc length s on the squeezed object (its node
+    displacements interpolated), and its normal turns as the boundary span there turned."""
+    op, L = model.op, model.L
+    dt = op.G.dtype
+    s3, angle, radius, push, step = grasp.adversary
+    crv = _scaled_curve(grasp.curve, L)
+    s3 = jnp.asarray(s3, dt) / L
+    q, n = boundary.point(crv, s3)
+    # the material point at arc length s3 on the squeezed object: interpolate the outer loop's
+    # node displacements along the span that holds s3; turn the normal as that span turned
+    k = crv.knots
+    sm = jnp.mod(s3, k[-1])
+    i = jnp.clip(jnp.searchsorted(k, sm, side="right") - 1, 0, k.shape[0] - 2)
+    j = jnp.mod(i + 1, k.shape[0] - 1)
+    w = (sm - k[i]) / (k[i + 1] - k[i])
+    q = q + (1 - w) * st.u[i] + w * st.u[j]
+    chord0 = op.points[j] - op.points[i]
+    chord = chord0 + st.u[j] - st.u[i]
+    turn = angle + jnp.arctan2(cross2(chord0, chord), jnp.sum(chord0 * chord))
+    ca, sa = jnp.cos(turn), jnp.sin(turn)
+    v = -jnp.array([ca * n[0] - sa * n[1], sa * n[0] + ca * n[1]])
+    r3 = radius / L
+    o = q - r3 * v
+    t, _ = first_touch(op.points + st.u, o, v, r3)
+    t = jnp.where(jnp.isfinite(t), t, 0.0)
+    base = model.centres(st.d).at[2].set(o + t * v)
+    dirn = jnp.zeros_like(model.dirn).at[2].set(v)
+    h = step / L
+    return dataclasses.replace(model, base=base, dirn=dirn, present=jnp.ones_like(model.present), r=model.r.at[2].set(r3),
+                          rot_depth=jnp.stack([st.d, jnp.zeros((), dt)]), D=push / L, h=h,
+                          ev_tol=h * 1e-4, eta=jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps),
+                          phase=jnp.array(1, jnp.int32))
+
+
