@@ -1,5 +1,5 @@
-"""The engine's stages, each alone on a hand-built state (init, step, locate_event,
-apply_event, finish), and the status precedence decided in finish."""
+"""The engine's stages, each alone on a state (init, step with its phases advance /
+locate_event / check, apply_event, finish), and the status precedence decided in finish."""
 import dataclasses
 
 import jax
@@ -26,64 +26,96 @@ def model():
     return engine.make_model(op, api.grasp_of(scene, op), api.config_of(scene))
 
 
+_step = jax.jit(engine.step)
+
+
 @pytest.fixture(scope="module")
 def first(model):
     return jax.jit(engine.init)(model)
 
 
-def test_init_touches_the_grip_nodes_and_records_one_row(model, first):
-    assert int(first.status) == engine.RUNNING and int(first.count) == 1
-    on = np.flatnonzero(np.asarray(first.mode) > FREE)
+@pytest.fixture(scope="module")
+def touched(model, first):
+    """The state after the first step: the touch recorded (row 0), phase ADVANCE."""
+    return _step(model, first)
+
+
+def test_init_touches_the_grip_nodes_and_the_first_step_records_the_touch(model, first):
+    """init: the grip nodes in contact (stick first), phase CHECK at d = 0, nothing recorded;
+    the first step solves the touch there and records row 0 with no force."""
+    assert int(first.status) == engine.RUNNING and int(first.count) == 0
+    assert int(first.phase) == engine.CHECK and float(first.d_star) == 0.0
+    mode = np.asarray(first.nodes.mode)
+    on = np.flatnonzero(mode > FREE)
     assert sorted(on.tolist()) == sorted(np.asarray(model.grip).tolist())
-    assert np.all(np.asarray(first.mode)[on] == STICK)
-    np.testing.assert_array_equal(np.asarray(first.finger)[np.asarray(model.grip)], [0, 1])
-    assert float(first.d) == 0.0 and np.abs(np.asarray(first.F)).max() < 1e-12   # no force at touch
+    assert np.all(mode[on] == STICK) and np.all(np.asarray(first.added)[on])
+    np.testing.assert_array_equal(np.asarray(first.nodes.finger)[np.asarray(model.grip)], [0, 1])
+    assert int(np.sum(np.asarray(first.slots.active))) == 2
+    st = _step(model, first)
+    assert int(st.status) == engine.RUNNING and int(st.count) == 1 and int(st.phase) == engine.ADVANCE
+    assert float(st.d) == 0.0 and np.abs(np.asarray(st.F)).max() < 1e-12   # no force at touch
 
 
-def test_step_advances_by_one_step_when_nothing_happens(model, first):
-    st = jax.jit(engine.step)(model, first)
+def test_step_advances_by_one_step_when_nothing_happens(model, touched):
+    st = _step(model, touched)
     np.testing.assert_allclose(float(st.d), float(model.h), rtol=1e-12)
     assert int(st.count) == 2 and int(st.stats.steps) == 1 and int(st.stats.events) == 0
+    assert int(st.stats.solves) == int(touched.stats.solves) + 1        # one solve per step
     F = np.asarray(st.F)
     assert np.abs(F.sum(0)).max() < 1e-12 * np.abs(F).max()      # equal and opposite
 
 
-def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, first):
-    """From the touch, the first event of the square is a new contact (A): located to the bracket
-    tolerance, applied at one depth with the event logged."""
-    c = engine.pack(model, first.mode, first.finger, first.theta, first.armed)
-    D = model.D
-    e_end = jnp.min(engine.solve_at(model, c, first.mode, D).e)
-    assert float(e_end) < 0, "some node must touch before the target depth"
-    lo, hi, iters = jax.jit(engine.locate_event)(model, c, first.mode, first.d, D, e_end)
-    assert float(hi - lo) <= float(model.ev_tol) and int(iters) > 0
-    assert float(jnp.min(engine.solve_at(model, c, first.mode, lo).e)) >= 0
-    assert float(jnp.min(engine.solve_at(model, c, first.mode, hi).e)) < 0
-    st = jax.jit(engine.apply_event)(model, first, c, lo, hi)
-    assert int(st.n_ev) >= 1 and np.all(np.asarray(st.events[2])[: int(st.n_ev)] == 0)   # kind A
-    assert float(lo) <= float(st.d) <= float(hi)
-    assert np.sum(np.asarray(st.mode) > FREE) == 2 + int(st.n_ev)
+def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, touched):
+    """One step over the whole depth crosses the first event of the square, a new contact (A):
+    ADVANCE opens a bracket, LOCATE shrinks it to the tolerance with the crossing inside,
+    apply_event logs it at one depth inside the bracket and hands CHECK the new contact."""
+    wide = dataclasses.replace(model, h=model.D)
+    st = _step(wide, touched)
+    assert int(st.phase) == engine.LOCATE and int(st.count) == 1            # nothing accepted
+    b = st.bracket
+    assert float(b.lo) == 0.0 and float(b.hi) == float(model.D) and np.any(np.asarray(b.e_hi) < 0)
+    while int(st.phase) == engine.LOCATE:
+        st = _step(wide, st)
+        assert int(st.stats.bracket_iters) <= int(model.cfg.bisect_iters)
+    b = st.bracket                                    # the final bracket (apply_event keeps it)
+    assert float(b.hi - b.lo) <= float(model.ev_tol) or int(b.iters) >= model.cfg.bisect_iters
+    assert np.all(np.asarray(b.e_lo) >= 0) and np.any(np.asarray(b.e_hi) < 0)
+    assert int(st.phase) == engine.CHECK and int(st.n_ev) >= 1
+    assert np.all(np.asarray(st.events[2])[: int(st.n_ev)] == 0)           # kind A
+    assert float(b.lo) <= float(st.d_star) <= float(b.hi)
+    added = np.asarray(st.added)
+    assert added.sum() == int(st.n_ev) and np.all(np.asarray(st.nodes.mode)[added] == STICK)
+    assert int(np.sum(np.asarray(st.slots.active))) == 2 + int(st.n_ev)     # reconcile bordered them in
+    # apply_event alone on the last bracket gives the same state
+    again = jax.jit(engine.apply_event)(wide, dataclasses.replace(st, bracket=b, phase=jnp.asarray(engine.LOCATE),
+                                                                  nodes=touched.nodes, n_ev=touched.n_ev,
+                                                                  events=touched.events))
+    np.testing.assert_array_equal(np.asarray(again.nodes.mode), np.asarray(st.nodes.mode))
+    assert float(again.d_star) == float(st.d_star)
 
 
-def test_finish_decides_the_status_in_one_order(model, first):
+def test_finish_decides_the_status_in_one_order(model, touched):
     fin = jax.jit(engine.finish)
-    mode, finger = np.asarray(first.mode), np.asarray(first.finger)
+    ns = touched.nodes
+    mode = np.asarray(ns.mode)
     i, j = (int(v) for v in np.asarray(model.grip))
+    with_mode = lambda st, mo: dataclasses.replace(st, nodes=ns._replace(mode=jnp.asarray(mo)))  # noqa: E731
     # a finger without contact: LOST_CONTACT (before SLIP_FAILURE)
-    lost = dataclasses.replace(first, mode=jnp.asarray(np.where(np.arange(len(mode)) == j, FREE, mode)))
+    lost = with_mode(touched, np.where(np.arange(len(mode)) == j, FREE, mode))
     assert int(fin(model, lost, True).status) == Status.LOST_CONTACT
     # every contact of one finger sliding: SLIP_FAILURE
-    slid = dataclasses.replace(first, mode=jnp.asarray(np.where(np.arange(len(mode)) == i, SLIP_POS, mode)))
+    slid = with_mode(touched, np.where(np.arange(len(mode)) == i, SLIP_POS, mode))
     assert int(fin(model, slid, True).status) == Status.SLIP_FAILURE
     # Newton failure comes before the contact checks, a stage's fault before everything
     assert int(fin(model, slid, False).status) == Status.NEWTON_FAILURE
     faulted = dataclasses.replace(slid, fault=jnp.asarray(Status.OVERFLOW, jnp.int32))
     assert int(fin(model, faulted, False).status) == Status.OVERFLOW
-    nan = dataclasses.replace(first, F=first.F.at[0, 0].set(jnp.nan))
+    nan = dataclasses.replace(touched, F=touched.F.at[0, 0].set(jnp.nan))
     assert int(fin(model, nan, True).status) == Status.NONFINITE
-    done = dataclasses.replace(first, d=model.D)
+    done = dataclasses.replace(touched, d=model.D)
     assert int(fin(model, done, True).status) == Status.SUCCESS
-    assert int(fin(model, first, True).status) == engine.RUNNING
+    assert int(fin(model, touched, True).status) == engine.RUNNING
+    assert int(fin(model, touched, True).count) == int(touched.count) + 1   # finish records the row
 
 
 def test_stats_and_records_of_a_full_squeeze(model):

@@ -96,7 +96,7 @@ def pair(op: Compliance, S: int, i, j) -> Slots:
     where = jnp.array([0, 1, 2, 3, 2 * S, 2 * S + 1, 2 * S + 2])
     Minv = jnp.eye(n, dtype=dt).at[2 * S:, 2 * S:].set(0.0).at[where[:, None], where[None, :]].set(inv7)
     Gc = jnp.zeros((op.G.shape[0], 2 * S), dt).at[:, :4].set(op.G[:, d4])
-    node = jnp.full(S, -1, jnp.int32).at[0].set(i).at[1].set(j)
+    node = jnp.full(S, -1, jnp.int32).at[0].set(jnp.int32(i)).at[1].set(jnp.int32(j))
     return Slots(node, Minv, Gc)
 
 
@@ -106,7 +106,7 @@ def activate(op: Compliance, sl: Slots, k, pos) -> Slots:
     b = jnp.concatenate([sl.Gc[d].T, op.N[d].T], axis=0)          # (2S + 3, 2)
     Minv = inverse_activate(sl.Minv, k, b, op.G[d][:, d])
     Gc = lax.dynamic_update_slice(sl.Gc, op.G[:, d], (0, 2 * k))
-    return Slots(sl.node.at[k].set(pos), Minv, Gc)
+    return Slots(sl.node.at[k].set(jnp.int32(pos)), Minv, Gc)
 
 
 def deactivate(sl: Slots, k) -> Slots:

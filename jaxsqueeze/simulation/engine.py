@@ -214,6 +214,7 @@ def reconcile(model: Model, st: State) -> State:
 def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
     """Adopt a solved configuration at depth d as the next row (slip angles move, anchors stay),
     and record it (:func:`finish`)."""
+    d = jnp.where(d >= model.D * (1 - 1e-12), model.D, d)     # an event located at the target ends there
     sl = st.slots
     safe = jnp.where(sl.active, sl.node, model.op.m)
     angle = st.nodes.theta.at[safe].set(sol.th, mode="drop")
@@ -455,7 +456,7 @@ def finish(model: Model, st: State, ok) -> State:
              jnp.where(~ok, Status.NEWTON_FAILURE,
              jnp.where(lost, Status.LOST_CONTACT,
              jnp.where(slip, Status.SLIP_FAILURE,
-             jnp.where(st.d >= model.D * (1 - 1e-12), Status.SUCCESS,
+             jnp.where(st.d >= model.D, Status.SUCCESS,
              jnp.where(count >= model.cfg.max_steps + 1, Status.MAX_STEPS, RUNNING)))))))
     return _with(st, count=count, status=status.astype(jnp.int32))
 
