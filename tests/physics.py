@@ -3,7 +3,6 @@ import numpy as np
 import triangle
 
 import jaxsqueeze as jsq
-from jaxsqueeze.mechanics import linalg
 
 
 def symmetric_square(a=0.1, max_edge=0.005):
@@ -11,19 +10,36 @@ def symmetric_square(a=0.1, max_edge=0.005):
     k = int(np.ceil(a / 2 / max_edge))
     t = np.linspace(0, a / 2, k + 1)
     h = a / 2 + 0 * t
-    quarter = np.concatenate([np.c_[t, 0 * t], np.c_[h[1:], t[1:]], np.c_[t[::-1][1:], h[1:]],
-                              np.c_[0 * t[1:-1], t[::-1][1:-1]]])
-    seg = np.c_[np.arange(len(quarter)), (np.arange(len(quarter)) + 1) % len(quarter)]
-    area = 1.5 * np.sqrt(3) / 4 * (max_edge / a) ** 2
-    tri = triangle.triangulate(dict(vertices=quarter / a, segments=seg), f"pq30a{area:.12f}YQ")
-    P, T = tri["vertices"] * a, tri["triangles"]
+    return symmetric_mesh(np.concatenate([np.c_[h, t], np.c_[t[::-1][1:], h[1:]]]), max_edge)
+
+
+def symmetric_ellipse(a, b, max_edge):
+    """Mesh of the ellipse with semi-axes a (x) and b (y), exactly mirror-symmetric about both axes."""
+    n = int(np.ceil(0.5 * np.pi * max(a, b) / max_edge))
+    t = np.linspace(0, np.pi / 2, n + 1)
+    return symmetric_mesh(np.c_[a * np.cos(t), b * np.sin(t)], max_edge)
+
+
+def symmetric_mesh(quarter, max_edge):
+    """A mesh exactly mirror-symmetric about both axes: the first quadrant bounded by the polyline
+    ``quarter`` (k, 2) from (x, 0) to (0, y) and the two axes, meshed once and mirrored."""
+    cx, cy = quarter[0, 0], quarter[-1, 1]
+    scale = 2 * max(cx, cy)
+    kx, ky = int(np.ceil(cx / max_edge)), int(np.ceil(cy / max_edge))
+    ax = np.c_[np.linspace(0, cx, kx + 1), np.zeros(kx + 1)]
+    ay = np.c_[np.zeros(ky + 1), np.linspace(cy, 0, ky + 1)]
+    outline = np.concatenate([ax[:-1], quarter[:-1], ay[:-1]])
+    seg = np.c_[np.arange(len(outline)), (np.arange(len(outline)) + 1) % len(outline)]
+    area = 1.5 * np.sqrt(3) / 4 * (max_edge / scale) ** 2
+    tri = triangle.triangulate(dict(vertices=outline / scale, segments=seg), f"pq30a{area:.12f}YQ")
+    P, T = tri["vertices"] * scale, tri["triangles"]
     pts, tris, off = [], [], 0
     for sx, sy in [(1, 1), (-1, 1), (-1, -1), (1, -1)]:
         pts.append(P * [sx, sy])
         tris.append((T if sx * sy > 0 else T[:, ::-1]) + off)
         off += len(P)
     P, T = np.concatenate(pts), np.concatenate(tris)
-    key = np.round(P / a * 1e9).astype(np.int64)
+    key = np.round(P / scale * 1e9).astype(np.int64)
     _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
     return jsq.Mesh.from_arrays(P[first], inv.reshape(-1)[T])
 
@@ -70,10 +86,9 @@ def check_states(res, mesh, mu, friction_model="coulomb", rtol=1e-7):
         stick, pos, neg = mode == 1, mode == 2, mode == 3
         if friction_model == "frictionless":
             assert not np.any(stick), f"row {k}: frictionless squeeze reports stick"
-            # near-neutral configurations: the truncated Newton step (linalg.lstsq) leaves the
-            # directions resisted below NEUTRAL_RTOL·σ_max unexcited, and with them a residual
-            # tangential force of that relative order (measured 1.1e-4 on the Hertz disk)
-            tol_t = linalg.NEUTRAL_RTOL * scale
+            # the drift rule (docs/numerics.md §5.1) exerts nothing on mirror-symmetric grasps and
+            # at most a tiny-friction share on asymmetric meshes (measured 0.24 %; bound 0.3 %)
+            tol_t = 3e-3 * scale
             assert np.abs(ft[on]).max(initial=0) <= tol_t, f"row {k}: tangential force without friction"
         elif friction_model == "coulomb":
             assert np.all(np.abs(ft[stick]) <= mu * fn[stick] + tol), f"row {k}: sticking force outside the cone"

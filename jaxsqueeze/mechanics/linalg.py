@@ -15,8 +15,6 @@ import jax.numpy as jnp
 from jax import lax
 from jax.custom_batching import custom_vmap
 
-NEUTRAL_RTOL = 1e-3   # truncation of lstsq: singular values below this fraction count as zero
-
 
 def _one_at_a_time(plain):
     """Batch rule: one system at a time on the CPU, the batched kernel elsewhere (GPU solvers
@@ -40,17 +38,7 @@ def solve(A: jax.Array, B: jax.Array) -> jax.Array:
     return jnp.linalg.solve(A, B)
 
 
-@custom_vmap
-def lstsq(A: jax.Array, B: jax.Array) -> jax.Array:
-    """Least-change solution of A X = B with singular values below NEUTRAL_RTOL·σ_max dropped.
-
-    Directions A (almost) does not resist are left out of X, so they stay unexcited.
-    """
-    return jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B
-
-
 solve.def_vmap(_one_at_a_time(jnp.linalg.solve))
-lstsq.def_vmap(_one_at_a_time(lambda A, B: jnp.linalg.pinv(A, rtol=NEUTRAL_RTOL) @ B))
 
 
 def inv(A: jax.Array) -> jax.Array:

@@ -43,7 +43,7 @@ from .model import Model, gap_to_fingers
 
 #: the rule that holds a frictionless object's indeterminate drift and spin: the weight of
 #: ½|ĝ⊥|² relative to the mean contact stiffness (:func:`_slip_angles`)
-NEUTRAL_REG = 1e-2
+NEUTRAL_REG = 1.0
 #: sliding slots solved in a compact system of this size when they fit (else all S slots)
 COMPACT = 16
 
