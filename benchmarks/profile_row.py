@@ -4,7 +4,7 @@ The foam square of ``jaxsqueeze/scenes/foam_square.toml`` (1,265 nodes, m = 122,
 stick/slip, 15 mm). Three parts:
 
 * **Program size.** Primitives in the traced squeeze (a ``jax.make_jaxpr`` walk through every
-  nested jaxpr, as ``tests/test_squeeze.py::_primitives``) and instructions in the compiled HLO
+  nested jaxpr, as ``tests/simulation/test_squeeze.py::_primitives``) and instructions in the compiled HLO
   (``jax.jit(...).lower(...).compile().as_text()``), bucketed by the ``op_name`` metadata:
   the ``init`` and ``loop`` named scopes of ``engine.simulate``, and inside the loop body the
   ``advance`` and ``event`` branches of ``engine.step`` (``cond/branch_0_fun``, ``branch_1_fun``).

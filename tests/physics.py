@@ -1,8 +1,13 @@
 """Shared test helpers: exactly symmetric meshes and the invariants every squeeze state must hold."""
+import os
+
 import numpy as np
 import triangle
 
 import jaxsqueeze as jsq
+
+#: the repository root (the tests live in folders that mirror the package)
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def symmetric_square(a=0.1, max_edge=0.005):

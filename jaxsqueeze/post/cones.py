@@ -173,19 +173,14 @@ def _bisector_normals(x, loops):
 def _band_rotations(band, E, res):
     """(k, m) cross-section rotation phi [rad] of a band at every row (exact, see docstring)."""
     from ..mechanics.band import band_pinv, band_stiffness
-    from ..mechanics.operator import rigid_modes
 
     K = band_stiffness(band, E)
     X = band_pinv(band, K)
     T = band.to_xy()
     F = np.asarray(res.forces, float).reshape(len(np.asarray(res.depth)), -1)       # (k, 2m)
     dofs = (X @ (T.T @ F.T)).T                                                   # (k, 4m)
-    u_c = dofs @ T.T                                                             # (k, 2m)
-    N = np.asarray(rigid_modes(np.asarray(band.points, float)))                  # rotation about origin
-    resid = np.asarray(res.boundary_displacement, float).reshape(len(F), -1) - u_c
-    g = np.linalg.lstsq(N, resid.T, rcond=None)[0].T                             # (k, 3)
     phi = np.stack([band.rotation(d) for d in dofs])
-    return phi + g[:, 2:3]
+    return phi + np.asarray(res.rigid, float)[:, 2:3]                            # + the recorded rigid rotation
 
 
 def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) -> ConeAxes:

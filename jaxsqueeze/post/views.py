@@ -312,9 +312,8 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
 
     The result stores the full field only at the final depth; every other row is rebuilt
     exactly (DESIGN 2.1: the state at a row is the linear-elastic response to that row's
-    contact forces) from the recorded boundary forces and displacements: the compliance
-    part from the operator's field map, the rigid part fitted to the recorded boundary
-    displacements. ``op`` is ``scene.operator()``; it must carry a field map.
+    contact forces) from the recorded contact forces through the operator's field map, plus
+    the row's recorded rigid part g. ``op`` is ``scene.operator()``; it must carry a field map.
     """
     res = trimmed(res)
     from ..mechanics.operator import rigid_modes
@@ -325,10 +324,7 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     L, Fs = float(op.length), float(op.force_scale)
     f_hat = np.asarray(res.forces[r], float).reshape(-1) / Fs
     u = np.asarray(op.field.solve(f_hat), float).reshape(-1, 2) * L
-    nodes = np.asarray(op.nodes)
-    resid = (np.asarray(res.boundary_displacement[r], float) - u[nodes]).reshape(-1) / L
-    N_b = np.asarray(rigid_modes(np.asarray(op.points, float)))
-    g, *_ = np.linalg.lstsq(N_b, resid, rcond=None)
+    g = np.asarray(res.rigid[r], float) / [L, L, 1.0]                 # scaled: (t_x / L, t_y / L, rotation)
     N_all = np.asarray(rigid_modes(op.field.points))
     return u + (N_all @ g).reshape(-1, 2) * L
 

@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
+import physics
 from jaxsqueeze.geometry import curves
 from jaxsqueeze.io import cli, scenefile
 from jaxsqueeze.post import cones
 from jaxsqueeze.mechanics.band import Band
 from jaxsqueeze.simulation.scene import compliance_of, nearest_boundary_node
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = physics.ROOT
 SCENES = {"heart": ("heart_band.toml", 0.10), "leaf": ("leaf_band.toml", 0.11)}
 MEANINGFUL = (jsq.Status.SUCCESS, jsq.Status.SLIP_FAILURE)
 

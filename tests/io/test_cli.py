@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
+import physics
 from jaxsqueeze.io import cli, scenefile
 from jaxsqueeze.post import views
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = physics.ROOT
 
 # The demo is run on a coarse mesh; the `run` scene below builds the very same mesh (same
 # max_edge, refine_edge and refine_radius), so both share one compiled squeeze.

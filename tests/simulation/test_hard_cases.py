@@ -23,10 +23,11 @@ import jaxsqueeze as jsq
 from jaxsqueeze.io import cli, scenefile
 from jaxsqueeze.simulation import api as grasp_mod
 from jaxsqueeze.simulation.laws import CONE_SLACK
+import physics
 from physics import check_states, nearest, symmetric_square
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+HERE = os.path.dirname(os.path.abspath(physics.__file__))   # tests/: physics.py for the child
+ROOT = physics.ROOT
 
 MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
 SQ = symmetric_square(0.1, 0.008)          # m = 56 boundary nodes, spacing 0.1/14 = 7.1 mm

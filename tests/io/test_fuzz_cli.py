@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 
+import physics
 from jaxsqueeze.io import cli
 
 try:
@@ -20,7 +21,7 @@ try:
 except ModuleNotFoundError:  # pragma: no cover
     import tomli as tomllib
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = physics.ROOT
 FUZZ = os.path.join(ROOT, "tests", "data", "fuzz")
 BASE = open(os.path.join(FUZZ, "base.toml"), encoding="utf-8").read()
 with open(os.path.join(FUZZ, "cases.toml"), "rb") as fh:
