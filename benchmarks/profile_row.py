@@ -6,11 +6,13 @@ stick/slip, 15 mm). Three parts:
 * **Program size.** Primitives in the traced squeeze (a ``jax.make_jaxpr`` walk through every
   nested jaxpr, as ``tests/simulation/test_squeeze.py::_primitives``) and instructions in the compiled HLO
   (``jax.jit(...).lower(...).compile().as_text()``), bucketed by the ``op_name`` metadata:
-  the ``init`` and ``loop`` named scopes of ``engine.simulate``, and inside the loop body the
-  ``advance`` and ``event`` branches of ``engine.step`` (``cond/branch_0_fun``, ``branch_1_fun``).
+  the ``init`` and ``squeeze`` named scopes of ``engine.simulate``, and inside the loop body the
+  one configuration solve (with its ``jvp``) and the phase branches of ``engine.step``
+  (``switch`` branches 0-3: advance, locate_event, check, prime).
 * **Compilation by stage.** Each engine stage jitted alone on a representative state (its own
-  trace + lower + compile time and HLO size): ``pack``, ``solve_at``, ``locate_event``,
-  ``apply_event``, ``step`` and ``init``.
+  trace + lower + compile time and HLO size): ``contacts.solve`` and its ``jvp``, ``reconcile``
+  with one new contact (the bordering update of the inverse), ``apply_event``, ``finish``,
+  ``step`` and ``init``.
 * **Time per stage.** Each of those stages jitted alone, best of ``--reps`` calls after its
   compile, on the state of a recorded row of the real squeeze (the contact set there, the next
   step's depth). Times are multiplied by how often a squeeze calls them (from its ``stats``)
@@ -60,12 +62,12 @@ def hlo_stats(text: str) -> dict:
 
 
 SCOPES = [  # (label, regex on op_name), first match wins
-    ("loop / step: event branch / jvp of solve_at at hi (apply_event)", r"loop/while/body/cond/branch_1_fun/jvp\("),
-    ("loop / step: event branch / locate_event while", r"loop/while/body/cond/branch_1_fun/while"),
-    ("loop / step: event branch / other (solves at d*, hypothesis, re-solve, log)", r"loop/while/body/cond/branch_1_fun"),
-    ("loop / step: advance branch (settle, finish)", r"loop/while/body/cond/branch_0_fun"),
-    ("loop / step: pack + solve at d1 (before the cond)", r"loop/"),
-    ("init (first touch, hypothesis, first solve)", r"/init/"),
+    ("squeeze loop / step: advance (accept or open a bracket)", r"squeeze/while/body/.*branch_0_fun"),
+    ("squeeze loop / step: locate_event + apply_event", r"squeeze/while/body/.*branch_1_fun"),
+    ("squeeze loop / step: check (hypothesis, settle)", r"squeeze/while/body/.*branch_2_fun"),
+    ("squeeze loop / step: prime", r"squeeze/while/body/.*branch_3_fun"),
+    ("squeeze loop / step: the one solve and its jvp, accept, finish, reconcile", r"squeeze/"),
+    ("init (first touch)", r"init/"),
     ("other (to_result, make_model)", r""),
 ]
 
@@ -120,17 +122,14 @@ def setup(scene=None):
     return sc, op0, gr, cfg, st, sim
 
 
-def row_state(model_fn, op0, gr, st, k):
-    """A loop state rebuilt from recorded row ``k`` of the final state ``st`` (history arrays)."""
+def row_state(op0, gr, cfg, k):
+    """The loop state at recorded row ``k``: the squeeze run again with ``max_steps = k`` stops
+    there (its contact slots, modes, anchors and forces are those of row k)."""
     import jax
-    import jax.numpy as jnp
 
     from jaxsqueeze.simulation import engine as E
-    st0 = jax.jit(lambda o, g: E.init(model_fn(o, g)))(op0, gr)
-    depth, mode, finger, theta, F, u, *_ = st.hist
-    return dataclasses.replace(st0, d=depth[k], mode=mode[k].astype(jnp.int32), finger=finger[k].astype(jnp.int32),
-                               theta=theta[k], F=F[k], u=u[k], status=jnp.array(E.RUNNING, jnp.int32),
-                               armed=jnp.ones_like(st0.armed))
+    cfg_k = dataclasses.replace(cfg, max_steps=k)
+    return jax.jit(lambda o, g: E.simulate(o, g, cfg_k))(op0, gr)
 
 
 def main(argv=None):
@@ -165,7 +164,7 @@ def main(argv=None):
     run = best(sim, op0, gr, reps=max(3, a.reps // 2))
     rec("squeeze", "simulate (jitted core, no to_result)", seconds=run, rows=rows, per_row_ms=1e3 * run / rows,
         steps=int(s.steps), events=int(s.events), bracket_iters=int(s.bracket_iters),
-        newton_iters=int(s.newton_iters))
+        newton_iters=int(s.newton_iters), solves=int(s.solves))
 
     # ---- program size
     prims = primitive_count(lambda g: E.simulate(op0, g, cfg), gr)
@@ -184,86 +183,58 @@ def main(argv=None):
     modes = np.asarray(st.hist[1][:rows])
     k = a.row if a.row is not None else int(np.argmax((modes >= 2).sum(1) * 1000 + (modes > 0).sum(1)))
     k = min(k, rows - 2)
-    srow = row_state(model_fn, op0, gr, st, k)
+    srow = row_state(op0, gr, cfg, k)
     n_contact, n_slide = int((modes[k] > 0).sum()), int((modes[k] >= 2).sum())
     rec("row", "profiled row", row=k, contacts=n_contact, sliding=n_slide, depth_mm=float(st.hist[0][k] * op0.length) * 1e3)
 
-    pack = lambda o, g, sr: E.pack(model_fn(o, g), sr.mode, sr.finger, sr.theta, sr.armed)  # noqa: E731
-    c = jax.jit(pack)(op0, gr, srow)
+    from jaxsqueeze.simulation import contacts
+    from jaxsqueeze.simulation.laws import FREE, STICK
     model = model_fn(op0, gr)
     d1 = jnp.minimum(srow.d + model.h, model.D)
-    s1 = jax.jit(lambda o, g, c, sr, d: E.solve_at(model_fn(o, g), c, sr.mode, d))(op0, gr, c, srow, d1)
-
-    def bordered_only(o, g, sr):
-        from jaxsqueeze.mechanics.bordered import bordered_matrix, slot_dofs
-        S = cfg.capacity
-        idx = jnp.nonzero(sr.mode > 0, size=S, fill_value=0)[0]
-        active = jnp.arange(S) < jnp.sum(sr.mode > 0)
-        dofs = slot_dofs(idx)
-        return bordered_matrix(o.G[dofs][:, dofs], o.N[dofs], active)
-
-    M = jax.jit(bordered_only)(op0, gr, srow)
-    from jaxsqueeze.mechanics import linalg
+    adv = dataclasses.replace(srow, phase=jnp.asarray(E.ADVANCE, jnp.int32), status=jnp.asarray(E.RUNNING, jnp.int32))
+    solve = lambda o, g, sr, d: contacts.solve(model_fn(o, g), sr.slots, sr.nodes, d, sr.hold)  # noqa: E731
+    s1 = jax.jit(solve)(op0, gr, srow, d1)
+    # one free node joins (what reconcile does after an event A): the nearest free node to a contact
+    free = np.flatnonzero(modes[k] == FREE)
+    new = int(free[np.argmin(np.min(np.abs(free[:, None] - np.flatnonzero(modes[k] > FREE)[None]), 1))])
+    joined = dataclasses.replace(srow, nodes=srow.nodes._replace(mode=srow.nodes.mode.at[new].set(STICK)))
     stages = [
         ("an empty jitted call (dispatch overhead of a stand-alone stage)", lambda x: x + 1.0, (d1,)),
-        ("pack (gather A, B; bordered matrix; explicit inverse)", pack, (op0, gr, srow)),
-        ("  bordered matrix alone (gather + assemble, 2S+3 = %d)" % (2 * cfg.capacity + 3), bordered_only, (op0, gr, srow)),
-        ("  linalg.inv of the bordered matrix alone", lambda M: linalg.inv(M), (M,)),
-        ("slip_angles (Newton on system S)", lambda o, g, c, d: E.slip_angles(model_fn(o, g), c, d), (op0, gr, c, d1)),
-        ("slip_rates (implicit dθ/dε)", lambda o, g, c, d: E.slip_rates(model_fn(o, g), c, c.theta0, d),
-         (op0, gr, c, d1)),
-        ("solve_at (Newton + forces + gaps + event functions)",
-         lambda o, g, c, sr, d: E.solve_at(model_fn(o, g), c, sr.mode, d), (op0, gr, c, srow, d1)),
-        ("jvp of solve_at (apply_event's bracket end)",
-         lambda o, g, c, sr, d: jax.jvp(lambda dd: E.solve_at(model_fn(o, g), c, sr.mode, dd), (d,), (jnp.ones_like(d),)),
-         (op0, gr, c, srow, d1)),
-        ("locate_event (whole bracket, full step [d, d+h])",
-         lambda o, g, c, sr, d0, d1, e1: E.locate_event(model_fn(o, g), c, sr.mode, d0, d1, e1),
-         (op0, gr, c, srow, srow.d, d1, jnp.asarray(-1e-3, d1.dtype))),
-        ("locate_event in a lane without an event (what a vmap lane pays at every step)",
-         lambda o, g, c, sr, d0, d1, e1: E.locate_event(model_fn(o, g), c, sr.mode, d0, d1, e1),
-         (op0, gr, c, srow, srow.d, d1, jnp.abs(jnp.min(jnp.where(jnp.isfinite(s1.e), s1.e, 1.0))) + 1e-6)),
-        ("apply_event (refine, apply, hypothesis, re-solve)",
-         lambda o, g, sr, c, lo, hi: E.apply_event(model_fn(o, g), sr, c, lo, hi),
-         (op0, gr, srow, c, srow.d + 0.5 * model.h, d1)),
-        ("finish (record the row, status)", lambda o, g, sr: E.finish(model_fn(o, g), sr, jnp.array(True)),
-         (op0, gr, srow)),
-        ("step (one loop iteration, whichever branch)", lambda o, g, sr: E.step(model_fn(o, g), sr), (op0, gr, srow)),
+        ("contacts.solve (slip Newton + forces + gaps + event functions)", solve, (op0, gr, srow, d1)),
+        ("jvp of contacts.solve (the one solve of a loop iteration)",
+         lambda o, g, sr, d: jax.jvp(lambda dd: solve(o, g, sr, dd), (d,), (jnp.ones_like(d),)), (op0, gr, srow, d1)),
+        ("reconcile with one new contact (bordering update of the inverse)",
+         lambda o, g, sr: E.reconcile(model_fn(o, g), sr), (op0, gr, joined)),
+        ("apply_event (refine d*, apply, log)", lambda o, g, sr: E.apply_event(model_fn(o, g), sr), (op0, gr, adv)),
+        ("finish (record the row, status)", lambda o, g, sr: E.finish(model_fn(o, g), sr, jnp.array(True)), (op0, gr, adv)),
+        ("step (one loop iteration, phase ADVANCE)", lambda o, g, sr: E.step(model_fn(o, g), sr), (op0, gr, adv)),
         ("init (first touch)", lambda o, g: E.init(model_fn(o, g)), (op0, gr)),
     ]
     times = {}
     for label, f, args in stages:
         tl, tc, text, comp = compile_time(f, *args)
         t = best(comp, *args, reps=a.reps)
-        times[label.strip()] = t
-        extra = {}
-        if label.startswith("locate_event"):
-            extra["bracket_iters"] = int(comp(*args)[2])
-        rec("stage", label, trace_lower_s=tl, compile_s=tc, run_ms=1e3 * t, **hlo_stats(text), **extra)
+        times[label.split(" (")[0]] = t
+        rec("stage", label, trace_lower_s=tl, compile_s=tc, run_ms=1e3 * t, **hlo_stats(text))
 
-    # how often a squeeze runs each stage (from its stats): solve_at in step, at the bracket
-    # ends and inside it, at d* and after the event, and in each hypothesis test; pack once per
-    # step plus twice per event (hypothesis, re-solve)
-    n_solve = rows + int(s.events) * 4 + int(s.bracket_iters)
-    n_pack = rows + 2 * int(s.events)
-    est = dict(solve_at=n_solve * times["solve_at (Newton + forces + gaps + event functions)"],
-               pack=n_pack * times["pack (gather A, B; bordered matrix; explicit inverse)"],
-               jvp=int(s.events) * times["jvp of solve_at (apply_event's bracket end)"],
-               finish=rows * times["finish (record the row, status)"])
+    # how often a squeeze runs each stage (from its stats): one solve (with its jvp) per loop
+    # iteration, one finish per recorded row
+    est = dict(solve=int(s.solves) * times["jvp of contacts.solve"], finish=rows * times["finish"],
+               step=int(s.solves) * times["step"])
     for k2, v in est.items():
-        rec("budget", f"{k2}: count x stage time", seconds=v, share_of_run=v / run)
+        rec("budget", f"{k2}: count x stage time ({int(s.solves)} solves, {rows} rows)", seconds=v, share_of_run=v / run)
 
     # ---- NumPy reference of the same row (bordered solve, slip Newton, gap test)
     ref_in = row_inputs(op0, gr, cfg, srow, d1)
     t_ref, ref = reference_row(ref_in, reps=max(20, a.reps))
-    f_jax = np.asarray(s1.f)[np.asarray(c.active)]
+    idx = np.flatnonzero(modes[k] > 0)
+    f_jax = np.asarray(s1.F)[idx]
     err = float(np.max(np.abs(ref["f"] - f_jax)) / np.max(np.abs(f_jax)))
-    eA = np.asarray(s1.e)
-    free = np.asarray(srow.mode) == 0
-    err_gap = float(np.max(np.abs(ref["gap"][free] - eA[free])))
+    free_now = modes[k] == 0
+    err_gap = float(np.max(np.abs(ref["gap"][free_now] - np.asarray(s1.e)[free_now])))
     rec("reference", "numpy row: LU of the bordered matrix + slip Newton + implicit rates + gap test",
         run_ms=1e3 * t_ref, newton_iters=ref["iters"], force_rel_err_vs_jax=err, gap_abs_err_vs_jax=err_gap,
-        jax_solve_at_over_numpy=times["solve_at (Newton + forces + gaps + event functions)"] / t_ref)
+        jax_solve_over_numpy=times["contacts.solve"] / t_ref)
 
     os.makedirs(a.out, exist_ok=True)
     cols = sorted({key for r in out for key in r}, key=lambda x: (x not in ("part", "item"), x))
@@ -277,8 +248,7 @@ def report(out, info):
     print("|---|---:|---:|---:|---:|---:|")
     for r in out:
         if r["part"] in ("stage",):
-            it = f" ({r['bracket_iters']} iterations)" if "bracket_iters" in r else ""
-            print(f"| {r['item']}{it} | {r['trace_lower_s']:.2f} | {r['compile_s']:.2f} | {r['hlo_instructions']} | "
+            print(f"| {r['item']} | {r['trace_lower_s']:.2f} | {r['compile_s']:.2f} | {r['hlo_instructions']} | "
                   f"{r['run_ms']:.3f} | {r['load']:.1f} |")
     print("\n| compiled squeeze, HLO instructions by scope | count | share |")
     print("|---|---:|---:|")

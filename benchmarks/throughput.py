@@ -8,8 +8,8 @@ stick/slip, 15 mm, float64), in one run:
 * ``reference``: a plain NumPy/SciPy row written here (:func:`numpy_row`: LU of the bordered
   matrix of eq. 4 for the s contacts, Newton on the slip angles with the analytic Jacobian,
   the implicit slip rates, the gaps of every boundary node and the cone margins) on the
-  recorded row with the most sliding contacts, checked against the engine's ``solve_at``
-  there; the ratios of the engine's ``solve_at`` and of its time per recorded row to it.
+  recorded row with the most sliding contacts, checked against the engine's
+  ``contacts.solve`` there; the ratios of the engine's ``contacts.solve`` and of its time per recorded row to it.
 * ``compile``: trace + lower + compile of the squeeze in a fresh process without the
   persistent cache (cold), and in two fresh processes sharing a new cache folder (the second
   one loads it: warm), with the cache hits JAX reports.
@@ -41,17 +41,16 @@ sys.path.insert(0, HERE)
 # ----------------------------------------------------------------------------- NumPy reference row
 def row_inputs(op0, gr, cfg, st, d) -> dict:
     """The numbers one row needs, as numpy (scaled units, as the engine sees them): the
-    operator, the contact set of loop state ``st`` and the fingers at depth ``d``."""
-    import jax
-
+    operator, the contact set of loop state ``st`` (its per-node modes) and the fingers at depth ``d``."""
     from jaxsqueeze.simulation import engine as E
     if cfg.rotation or cfg.contact != "segment" or cfg.friction_model != "coulomb":
         raise NotImplementedError("the reference row covers Coulomb, segment contacts, no rotation")
     model = E.make_model(op0, gr, cfg)
     C = np.asarray(model.centres(d))
-    return dict(G=np.asarray(op0.G), N=np.asarray(op0.N), P=np.asarray(op0.points), mode=np.asarray(st.mode),
-                finger=np.asarray(st.finger), theta=np.asarray(st.theta), C=C, e=np.asarray(model.e),
-                r=float(model.r), phi=float(model.phi), gap_tol=float(model.gap_tol), tol=float(model.newton_tol),
+    ns = st.nodes
+    return dict(G=np.asarray(op0.G), N=np.asarray(op0.N), P=np.asarray(op0.points), mode=np.asarray(ns.mode),
+                finger=np.asarray(ns.finger), theta=np.asarray(ns.theta), C=C, e=np.asarray(model.dirn[1]),
+                r=float(model.r[0]), phi=float(model.phi), gap_tol=float(model.gap_tol), tol=float(model.newton_tol),
                 iters=cfg.newton_iters)
 
 
@@ -318,21 +317,26 @@ def main(argv=None):
     rec("squeeze", "jsq.squeeze (incl. validation and trim)", seconds=t_sq, rows=n_rows,
         per_row_ms=1e3 * t_sq / n_rows)
 
-    # ---- the NumPy reference row on a representative recorded row (most sliding contacts)
-    from profile_row import row_state
+    # ---- the NumPy reference row on a representative recorded row (most sliding contacts): the
+    # squeeze is run again with max_steps = k, so its final state is the contact set of row k
+    import dataclasses
+
+    from jaxsqueeze.simulation import contacts
     st = jax.jit(lambda o, g: E.simulate(o, g, cfg))(op0, gr)
     modes = np.asarray(st.hist[1][:n_rows])
     k = min(int(np.argmax((modes >= 2).sum(1) * 1000 + (modes > 0).sum(1))), n_rows - 2)
-    srow = row_state(lambda o, g: E.make_model(o, g, cfg), op0, gr, st, k)
+    cfg_k = dataclasses.replace(cfg, max_steps=k)
+    srow = jax.jit(lambda o, g: E.simulate(o, g, cfg_k))(op0, gr)
+    assert int(srow.count) == k + 1 and np.array_equal(np.asarray(srow.nodes.mode), modes[k])
     model = E.make_model(op0, gr, cfg)
     d1 = jax.numpy.minimum(srow.d + model.h, model.D)
     inp = row_inputs(op0, gr, cfg, srow, d1)
     t_ref, ref = reference_row(inp, reps=max(20, 4 * a.reps))
-    c = jax.jit(lambda o, g, sr: E.pack(E.make_model(o, g, cfg), sr.mode, sr.finger, sr.theta, sr.armed))(op0, gr, srow)
-    one = jax.jit(lambda o, g, c, sr, d: E.solve_at(E.make_model(o, g, cfg), c, sr.mode, d))
-    s1 = jax.block_until_ready(one(op0, gr, c, srow, d1))
-    t_one, _ = best_of(lambda: jax.block_until_ready(one(op0, gr, c, srow, d1)), max(20, 4 * a.reps))
-    err = float(np.max(np.abs(ref["f"] - np.asarray(s1.f)[np.asarray(c.active)])) / np.max(np.abs(ref["f"])))
+    one = jax.jit(lambda o, g, sr, d: contacts.solve(E.make_model(o, g, cfg), sr.slots, sr.nodes, d, sr.hold))
+    s1 = jax.block_until_ready(one(op0, gr, srow, d1))
+    t_one, _ = best_of(lambda: jax.block_until_ready(one(op0, gr, srow, d1)), max(20, 4 * a.reps))
+    idx = np.flatnonzero(modes[k] > 0)
+    err = float(np.max(np.abs(ref["f"] - np.asarray(s1.F)[idx])) / np.max(np.abs(ref["f"])))
     per_row = t_core / n_rows
     rec("reference", f"numpy/scipy row (row {k}: {int((modes[k] > 0).sum())} contacts, "
         f"{int((modes[k] >= 2).sum())} sliding, {ref['iters']} Newton its)", per_row_ms=1e3 * t_ref,
@@ -341,7 +345,7 @@ def main(argv=None):
         t_ref1, _ = reference_row(inp, reps=max(20, 4 * a.reps))
     rec("reference", "numpy/scipy row, OpenBLAS limited to 1 thread", per_row_ms=1e3 * t_ref1,
         ratio_to_numpy=t_ref1 / t_ref)
-    rec("reference", "jax solve_at alone on the same row (jitted, padded to capacity)", per_row_ms=1e3 * t_one,
+    rec("reference", "jax contacts.solve alone on the same row (jitted, S = capacity slots)", per_row_ms=1e3 * t_one,
         ratio_to_numpy=t_one / t_ref)
     rec("reference", "jax per recorded row in a squeeze (core / rows)", per_row_ms=1e3 * per_row,
         ratio_to_numpy=per_row / t_ref, target=TARGETS["per_row"])

@@ -48,6 +48,10 @@ from .status import Status
 RUNNING = -1
 ADVANCE, LOCATE, CHECK, PRIME = 0, 1, 2, 3
 SETTLE_ITERS = 6   # CHECK passes that may change a frictionless contact set at one depth
+#: frictionless rows are accepted while the drift rule's tangential forces, and any pull, stay
+#: below this fraction of the row's largest contact force (docs/numerics.md §5.1); beyond it the
+#: object would slide away along its drift and the squeeze stops with STALLED
+DRIFT_SHARE = 1e-2
 
 
 # ----------------------------------------------------------------------------- loop state
@@ -222,8 +226,15 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
     s = st.stats
     stats = s._replace(newton_iters=s.newton_iters + sol.iters, newton_max=jnp.maximum(s.newton_max, sol.iters),
                        residual=jnp.maximum(s.residual, jnp.where(sol.iters > 0, sol.resid, 0.0)))
+    fault = st.fault
+    if model.cfg.friction_model == "frictionless":
+        on = st.nodes.mode > FREE
+        floor = 100 * jnp.finfo(sol.F.dtype).eps           # scaled forces at the touch are round-off
+        big = DRIFT_SHARE * jnp.maximum(jnp.max(jnp.abs(sol.F)), floor)
+        off = jnp.any(on & ((jnp.abs(sol.ft) > big) | (sol.fn < -big)))
+        fault = jnp.where(off & (fault == RUNNING), Status.STALLED, fault).astype(jnp.int32)
     st = _with(st, d=d, nodes=st.nodes._replace(theta=angle, armed=armed), angle=angle, F=sol.F, u=sol.u,
-               g=sol.g, e=sol.e, de=dsol.e, stats=stats, phase=jnp.array(ADVANCE, jnp.int32))
+               g=sol.g, e=sol.e, de=dsol.e, stats=stats, phase=jnp.array(ADVANCE, jnp.int32), fault=fault)
     return finish(model, st, sol.ok)
 
 

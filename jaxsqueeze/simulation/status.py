@@ -15,7 +15,7 @@ class Status(enum.IntEnum):
     NONFINITE = 5        #: a NaN or inf appeared in the state
     EVENT_OVERFLOW = 6   #: the event log is full (raise ``max_events``)
     INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone
-    STALLED = 8          #: a contact event undid itself at one depth (no consistent contact set)
+    STALLED = 8          #: no consistent contact set at this depth (an event undid itself, or a frictionless object would slide away)
     LOST_CONTACT = 9     #: a grasping finger lost all of its contacts (the object fell out)
     INVALID_INPUT = 10   #: a number of the scene or its settings is invalid (see ``result.invalid``)
 
@@ -39,9 +39,10 @@ _ADVICE = {
     Status.OVERFLOW: "More contact nodes than slots. Raise Settings.capacity.",
     Status.NONFINITE: "A non-finite value appeared. Check the scene's scale and material values.",
     Status.EVENT_OVERFLOW: "The event log is full. Raise Settings.max_events.",
-    Status.STALLED: ("A node touched a fingertip, but as a contact it would pull: no consistent contact set "
-                     "exists at this depth on this mesh (typical of frictionless squeezes with a soft neutral "
-                     "mode, or of a coarse corner). Refine the mesh near the contact or use Coulomb friction."),
+    Status.STALLED: ("No consistent contact set exists at this depth: a node touched a fingertip but as a contact "
+                     "it would pull, or (frictionless) holding the object in place would take more than 1 % "
+                     "tangential force, i.e. the object would slide out sideways (an asymmetric frictionless "
+                     "grip). Grip nearer a symmetry line, refine the mesh near the contact, or use Coulomb friction."),
     Status.INFEASIBLE_GRIP: ("The segment between the two grip nodes leaves a friction cone, so the squeeze "
                              "cannot start (Section I-A). Pick nodes more nearly opposite or raise the friction."),
 }

@@ -126,3 +126,21 @@ def test_stats_and_records_of_a_full_squeeze(model):
     assert int(s.events) >= 1 and int(s.bracket_iters) >= int(s.events)
     rigid = np.asarray(st.hist[8])[int(st.count) - 1]
     np.testing.assert_allclose(rigid, np.asarray(st.g), rtol=0, atol=0)   # the rigid part is recorded
+
+
+def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
+    """check: after an event at the depth the squeeze already stood at, a contact set that came
+    back to the modes from before the event would repeat forever: STALLED (a fault that finish
+    reports first), never a loop. The same pass with the depth moved on is accepted as a row."""
+    st = _step(model, touched)                                        # a row at d = h, phase ADVANCE
+    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d, s.hold),
+                                              (s.d,), (jnp.ones_like(s.d),)))(model, st)
+    undone = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
+                                 added=jnp.zeros_like(st.added), checks=jnp.asarray(0, jnp.int32))
+    chk = jax.jit(engine.check)
+    out, accept = chk(model, undone, sol, dsol, st.d)
+    assert bool(accept) and int(out.fault) == Status.STALLED
+    assert int(jax.jit(engine.finish)(model, out, True).status) == Status.STALLED
+    moved = dataclasses.replace(undone, d_star=st.d + model.h)
+    out, accept = chk(model, moved, sol, dsol, st.d + model.h)
+    assert bool(accept) and int(out.fault) == engine.RUNNING
