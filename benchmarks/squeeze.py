@@ -38,7 +38,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 SCENE = os.path.join(ROOT, "jaxsqueeze", "scenes", "foam_square.toml")
-DATE = "2026-11-22"
+DATE = time.strftime("%Y-%m-%d")   # the day of the run
 
 
 def machine() -> str:

@@ -17,7 +17,9 @@ stick/slip, 15 mm, float64), in one run:
   ``jsq.squeeze`` (up to ``--loop-max``), ``jax.vmap`` of the core in a fresh process (stopped
   after ``--vmap-timeout`` s and then reported as a bound), and :func:`jaxsqueeze.batch.map_scenes`
   (one single-threaded process per core, wall time including the workers' start-up and
-  compile or cache load); evaluations per minute.
+  compile or cache load), and :func:`jaxsqueeze.batch.split_vmap` in a fresh process with one
+  host device per core (the batch split over them, each device vmapping its chunk); evaluations
+  per minute.
 * ``gpu``: where ``jax.devices()[0].platform == "gpu"``, ``vmap`` at 1/256/1,024/4,096.
 
 Every row records the 1-minute load average. Writes ``results/throughput.csv`` and
@@ -193,9 +195,12 @@ def best_of(f, reps):
 def worker(argv):
     """Subprocess entry points; each prints one JSON line per result."""
     import json
+    kind = argv[0]
+    if kind == "split":         # split B: the batch over one host device per core (set before JAX starts)
+        from jaxsqueeze.batch import host_devices_flag
+        os.environ["XLA_FLAGS"] = host_devices_flag()
     import jax
     jax.config.update("jax_enable_x64", True)
-    kind = argv[0]
     if kind == "compile":       # compile [CACHE_DIR]
         events = {}
         jax.monitoring.register_event_listener(lambda name, **kw: events.__setitem__(name, events.get(name, 0) + 1))
@@ -212,22 +217,25 @@ def worker(argv):
         t3 = time.perf_counter()
         print(json.dumps(dict(setup_s=t1 - t0, trace_lower_s=t2 - t1, compile_s=t3 - t2,
                               cache_hits=events.get("/jax/compilation_cache/cache_hits", 0))), flush=True)
-    elif kind == "vmap":        # vmap B
+    elif kind in ("vmap", "split"):        # vmap B [reps] / split B [reps]
         import dataclasses
         import jax.numpy as jnp
 
+        from jaxsqueeze.batch import split_vmap
         from jaxsqueeze.simulation import api as G
         B = int(argv[1])
         sc, op0, gr, cfg, pos = scene_inputs()
         dev = jax.devices()[0]
         q = jnp.asarray(pos[grips(sc.mesh, B)])
 
-        def fn(o, g0, q):
-            res, F, _ = jax.vmap(lambda qq: G._run(o, dataclasses.replace(g0, grip=qq), cfg))(q)
+        def one(o, g0, qq):
+            res, F, _ = G._run(o, dataclasses.replace(g0, grip=qq), cfg)
             return res.status, res.count
+        fn = split_vmap(one, in_axes=(None, None, 0)) if kind == "split" else jax.jit(jax.vmap(one, in_axes=(None, None, 0)))
         t = time.perf_counter()
-        comp = jax.jit(fn).lower(op0, gr, q).compile()
-        print(json.dumps(dict(compile_s=time.perf_counter() - t, platform=dev.platform)), flush=True)
+        comp = fn.lower(op0, gr, q).compile()
+        print(json.dumps(dict(compile_s=time.perf_counter() - t, platform=dev.platform, devices=jax.device_count())),
+              flush=True)
         reps = int(argv[2]) if len(argv) > 2 else 1
         t_run, (status, count) = best_of(lambda: jax.block_until_ready(comp(op0, gr, q)), reps)
         print(json.dumps(dict(run_s=t_run, max_rows=int(np.max(count)), mean_rows=float(np.mean(count)),
@@ -380,7 +388,7 @@ def main(argv=None):
             rec("batch", "loop of jsq.squeeze (one process, XLA default threads)", batch=B, seconds=dt,
                 per_grasp_ms=1e3 * dt / B, evals_per_min=60 * B / dt, mean_rows=float(np.mean([o[1] for o in outs])),
                 success=sum(o[0] == 0 for o in outs))
-        r, to = sub(["vmap", B], a.vmap_timeout)
+        r, to = sub(["vmap", B, a.reps], a.vmap_timeout)
         if to:
             comp_s = r[0]["compile_s"] if r else float("nan")
             bound = a.vmap_timeout - (comp_s if r else 0.0)
@@ -393,6 +401,12 @@ def main(argv=None):
                 mean_rows=r[1]["mean_rows"], success=r[1]["success"],
                 ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["vmap"])
         if B > 1:
+            r, to = sub(["split", B, a.reps], a.vmap_timeout)
+            if len(r) >= 2:
+                rec("batch", f"batch.split_vmap over {r[0]['devices']} host devices (one per core)", batch=B,
+                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
+                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], success=r[1]["success"],
+                    ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])
             with tempfile.TemporaryDirectory() as tmp:
                 t = time.perf_counter()
                 outs = map_scenes(T.evaluate_grip, list(q), processes=a.processes, cache=tmp, progress=False)

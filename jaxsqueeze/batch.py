@@ -22,6 +22,12 @@ the others, and the next run, load it from disk. Each worker pays its imports an
 compile or cache load once (seconds): a pool pays off for batches that take longer than that.
 Return small results (numbers, small numpy arrays), not whole :class:`SqueezeResult` objects
 with their padded history, to keep the transfer back cheap.
+
+Inside one process, :func:`split_vmap` splits a ``vmap`` batch over the process's devices
+(one chunk per device, the chunks run at once): on a CPU start the process with
+``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` (:func:`host_devices_flag`; it
+must be set before JAX starts) and every core runs its share of the batch, without a pool's
+start-up.
 """
 from __future__ import annotations
 
@@ -48,6 +54,59 @@ def cpu_count() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:      # not on Linux
         return os.cpu_count() or 1
+
+
+def host_devices_flag(n: int | None = None) -> str:
+    """The ``XLA_FLAGS`` entry that gives a CPU process ``n`` devices (default: one per core),
+    for :func:`split_vmap`. Set it in the environment before JAX is imported, e.g.
+    ``os.environ["XLA_FLAGS"] = host_devices_flag()`` at the top of a script."""
+    return f"--xla_force_host_platform_device_count={n or cpu_count()}"
+
+
+def split_vmap(fn: Callable, in_axes=0, devices=None) -> Callable:
+    """``jax.vmap(fn, in_axes)`` with the batch split evenly over ``devices`` (default: all
+    local devices), each device vmapping its own chunk at the same time (``jax.shard_map``
+    over a one-axis mesh). ``in_axes``: 0 or None per positional argument (None: shared by
+    every member, e.g. the compliance operator). The batch is padded to a multiple of the
+    device count with copies of its last member, and the padding is dropped from the result.
+
+    With one device it is ``jax.jit(jax.vmap(fn))``. The returned function is jitted once;
+    keep it and call it again to reuse the compiled program. Results equal ``jax.vmap``'s
+    (each member is the same computation on its own device).
+    """
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    from jax.sharding import Mesh, PartitionSpec
+
+    devs = list(devices) if devices is not None else jax.local_devices()
+    n = len(devs)
+    inner = jax.vmap(fn, in_axes=in_axes)
+    if n == 1:
+        return jax.jit(inner)
+
+    @jax.jit
+    def call(*args):
+        axes = in_axes if isinstance(in_axes, (tuple, list)) else (in_axes,) * len(args)
+        if any(a not in (0, None) for a in axes):
+            raise ValueError(f"split_vmap: in_axes must be 0 or None per argument, got {in_axes!r}")
+        sizes = {x.shape[0] for a, arg in zip(axes, args) if a == 0 for x in jax.tree.leaves(arg)}
+        if len(sizes) != 1:
+            raise ValueError(f"split_vmap: the batched arguments need one common leading size, got {sorted(sizes)}")
+        size = sizes.pop()
+        pad = -size % n
+
+        def padded(x):
+            return jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]) if pad else x
+
+        args = [jax.tree.map(padded, arg) if a == 0 else arg for a, arg in zip(axes, args)]
+        spec = PartitionSpec("batch")
+        mapped = jax.shard_map(inner, mesh=Mesh(np.array(devs), ("batch",)),
+                               in_specs=tuple(spec if a == 0 else PartitionSpec() for a in axes),
+                               out_specs=spec, check_vma=False)
+        return jax.tree.map(lambda y: y[:size], mapped(*args))
+
+    return call
 
 
 def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None = None,

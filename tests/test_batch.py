@@ -1,5 +1,6 @@
 """jaxsqueeze.batch.map_scenes: results in input order, inline equal to the process pool,
-a squeeze in worker processes equal to the same squeeze here."""
+a squeeze in worker processes equal to the same squeeze here; split_vmap equal to vmap on one
+and on two host devices."""
 import os
 
 import numpy as np
@@ -61,3 +62,55 @@ def test_squeezes_in_two_processes_equal_inline(tmp_path):
         assert x64, "workers take this process's precision"
         np.testing.assert_allclose(f1, f2, rtol=1e-12, atol=1e-15)
     assert any((tmp_path / "cache").iterdir())
+
+
+SPLIT_CHILD = r"""
+import os, sys, json
+from jaxsqueeze.batch import host_devices_flag, split_vmap
+os.environ["XLA_FLAGS"] = host_devices_flag(2)
+import jax, jax.numpy as jnp, numpy as np
+sys.path.insert(0, {tests!r})
+import test_batch
+assert jax.device_count() == 2
+f = split_vmap(test_batch._split_member, in_axes=(None, 0))
+for size in (1, 5, 8):          # odd sizes are padded, and the padding dropped
+    x = jnp.arange(size * 3.0).reshape(size, 3)
+    y, s = f(jnp.float32(2.0), {{"x": x}})
+    np.testing.assert_allclose(np.asarray(y), 2.0 * np.asarray(x) + 1.0)
+    np.testing.assert_allclose(np.asarray(s), np.asarray(x).sum(1))
+    devs = {{d.id for d in y.sharding.device_set}}
+    print(json.dumps(dict(size=size, shape=list(y.shape), devices=sorted(devs))))
+"""
+
+
+def _split_member(a, tree):
+    """One member of a split_vmap batch: a shared scalar and a pytree with a (3,) leaf."""
+    return a * tree["x"] + 1.0, tree["x"].sum()
+
+
+def test_split_vmap_equals_vmap_on_one_and_two_devices():
+    """split_vmap: with this process's one CPU device it is jit(vmap); in a child with two host
+    devices (host_devices_flag) the batch is split over both, padded for odd sizes, and equal."""
+    import json
+    import subprocess
+    import sys
+
+    import jax
+    import jax.numpy as jnp
+
+    from jaxsqueeze.batch import split_vmap
+    x = jnp.arange(12.0).reshape(4, 3)
+    y, s = split_vmap(_split_member, in_axes=(None, 0))(jnp.float32(2.0), {"x": x})
+    ry, rs = jax.vmap(_split_member, in_axes=(None, 0))(jnp.float32(2.0), {"x": x})
+    np.testing.assert_array_equal(np.asarray(y), np.asarray(ry))
+    np.testing.assert_array_equal(np.asarray(s), np.asarray(rs))
+    with pytest.raises(ValueError, match="in_axes"):
+        split_vmap(_split_member, in_axes=(None, 1), devices=jax.local_devices() * 2)(jnp.float32(2.0), {"x": x})
+    here = os.path.dirname(os.path.abspath(__file__))
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    out = subprocess.run([sys.executable, "-c", SPLIT_CHILD.format(tests=here)], capture_output=True, text=True,
+                         timeout=300, env=env)
+    assert out.returncode == 0, out.stderr[-3000:]
+    rows = [json.loads(ln) for ln in out.stdout.splitlines() if ln.startswith("{")]
+    assert [r["size"] for r in rows] == [1, 5, 8] and all(r["devices"] == [0, 1] for r in rows)
+    assert [r["shape"] for r in rows] == [[1, 3], [5, 3], [8, 3]]
