@@ -13,8 +13,9 @@ Knobs:
   (3 mm / 0.5 mm, 4,250 nodes). ``--reference S`` moves the whole series (members 2 to 8
   times coarser than the reference). A finer reference is not possible yet: the squeeze
   fails on finer contact zones (refine_edge 0.4 / 0.35 mm: STALLED at 13.0 / 10.6 mm;
-  0.3 / 0.25 mm: SLIP_FAILURE in the first 0.1 mm), so ``--reference 0.125`` (the series
-  12 ... 3 mm against 1.5 mm / 0.25 mm) only becomes usable once that is fixed.
+  0.3 / 0.25 mm: SLIP_FAILURE in the first 0.1 mm, the same with the engine before the
+  rewrite), so ``--reference 0.125`` (the series 12 ... 3 mm against 1.5 mm / 0.25 mm) only
+  becomes usable once that is fixed.
   The meshes are built with ``jsq.shapes.rectangle`` as the scene file's loader builds them
   (the zone radius stays the file's 2 x 6 mm; the loader itself refuses the 1.5 mm / 0.25 mm
   mesh on its pre-meshing size estimate). Only the grading between the two zones
@@ -28,8 +29,9 @@ Knobs:
 * ``event_tol``: step x 1e-1 ... 1e-9 (default step x 1e-4).
 * ``newton_tol``: 1e-3 ... 1e-13 rad (default 1e-11 in float64).
 * ``precision``: float32 (the same scene built and run inside ``jax.enable_x64(False)``, with
-  float32's default tolerances; same result as a process with x64 off) against float64. At
-  the time of writing the float32 squeeze STALLS at 12.0 mm and is not timed.
+  float32's default tolerances; same result as a process with x64 off) against float64. (It
+  stalled at 12.0 mm until a new contact's pull test judged the sign of the force's rate
+  instead of its round-off value at the event depth.)
 * ``build``: compliance build dense, spectral against sparse (the default).
 
 Errors, each against the knob's reference:

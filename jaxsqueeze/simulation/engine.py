@@ -366,8 +366,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     """The contact set just past d*, judged from the solve at d* and its rate (the probe
     d* + η to first order). Returns (mode, finger, theta, changed, unsettled).
 
-    Coulomb and full stick (first pass only): a new contact that would pull is dropped; under
-    Coulomb, one whose force leaves its cone slides against its tangential force.
+    Coulomb and full stick (first pass only): a new contact that would pull is dropped (judged
+    by the sign of its force's rate: at d* it carries none, so in float32 its value there is
+    round-off); under Coulomb, one whose force leaves its cone slides against its tangential force.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
@@ -387,7 +388,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         changed = jnp.any(inside | drop)
         return mode, finger, theta, changed, changed & (st.checks + 1 >= SETTLE_ITERS)
     test = st.added & (st.checks == 0)
-    pull = test & (fn <= 0)
+    pull = test & (dsol.fn <= 0)     # a contact just made carries no force at d*: its rate decides
     mode = jnp.where(pull, FREE, ns.mode)
     if model.cfg.slip_events:
         out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
