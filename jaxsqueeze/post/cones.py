@@ -296,14 +296,6 @@ def grasp_stability(res, obj, axis: str = "surface", friction: float | None = No
                      c.depth, c.relative_depth, change, slip, c)
 
 
-def plot_cone_rotation(res, obj, axis: str = "surface", friction: float | None = None):
-    """Kept importable here; the plot lives in :func:`jaxsqueeze.post.plots.plot_cone_rotation`
-    (imported on call, so cones does not import plots at import time: no cycle)."""
-    from . import plots
-
-    return plots.plot_cone_rotation(res, obj, axis=axis, friction=friction)
-
-
 # public names for the plot in jaxsqueeze.post.plots (no private name crosses modules)
 unpack = _unpack
 boundary_geometry = _geometry

@@ -16,7 +16,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 from matplotlib.tri import Triangulation
 
-from . import views
+from . import cones, views
 from .views import EVENT_LETTERS, FREE, SLIP_POS, STICK
 
 MM = 1e3
@@ -326,7 +326,7 @@ def _cmap(k):
 
 def save_all(res, scene, outdir) -> dict:
     """Write deformed.png, force_profile.png, sliding_profile.png and events.png to ``outdir``
-    (for a band also cones.png, :func:`jaxsqueeze.cones.plot_cone_rotation`).
+    (for a band also cones.png, :func:`plot_cone_rotation`).
 
     Returns {name: path}.
     """
@@ -354,8 +354,6 @@ def plot_cone_rotation(res, obj, axis: str = "surface", friction: float | None =
     Right: cone margin [deg] per finger (0 = on the cone edge: slip). Returns a Figure.
     """
     res = views.trimmed(res)
-    from . import cones
-
     st = cones.grasp_stability(res, obj, axis=axis, friction=friction)
     c = st.cones
     geo, op, _, mu = cones.unpack(obj)

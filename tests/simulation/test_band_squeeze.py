@@ -13,7 +13,7 @@ import jaxsqueeze as jsq
 import physics
 from jaxsqueeze.geometry import curves
 from jaxsqueeze.io import cli, scenefile
-from jaxsqueeze.post import cones
+from jaxsqueeze.post import cones, plots
 from jaxsqueeze.mechanics.band import Band
 from jaxsqueeze.simulation.scene import compliance_of, nearest_boundary_node
 
@@ -134,7 +134,7 @@ def test_heart_breaks_leaf_stabilizes(runs):
 
 
 def test_cone_rotation_plot(runs):
-    fig = cones.plot_cone_rotation(*reversed(runs["heart"]))
+    fig = plots.plot_cone_rotation(*reversed(runs["heart"]))
     assert len(fig.axes) == 3
 
 
