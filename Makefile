@@ -16,7 +16,7 @@ demo: $(STAMP)
 	$(BIN)/jaxsqueeze demo --out demo_out
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q tests
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile tests
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/precompute.py
