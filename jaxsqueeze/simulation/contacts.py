@@ -213,13 +213,21 @@ def _view(sl: Slots, ns: Nodes) -> _View:
 def _linear(model: Model, sl: Slots, v: _View, p):
     """Slot forces (S, 2) and g (3,) for prescribed slot displacements p (S, 2) (eq. 4)."""
     S = v.idx.shape[0]
-    z = sl.Minv[:, : 2 * S] @ jnp.where(v.active[:, None], p, 0.0).reshape(-1)
+    # the whole inverse times [p; 0]: a column slice Minv[:, :2S] would be a copy of the
+    # matrix on every call (on the CPU a sliced dot operand is materialised first)
+    rhs = jnp.concatenate([jnp.where(v.active[:, None], p, 0.0).reshape(-1), jnp.zeros(3, p.dtype)])
+    z = sl.Minv @ rhs
     return z[: 2 * S].reshape(S, 2), z[2 * S:]
 
 
-def _block_form(sl: Slots, S: int):
-    """P (S, 2, S, 2): the slot-force block of the inverse, f_k = Σ_j P[k, :, j, :] p_j."""
-    return sl.Minv[: 2 * S, : 2 * S].reshape(S, 2, S, 2)
+def _block_form(sl: Slots, sel):
+    """P (Q, 2, Q, 2): the slot-force block of the inverse between the slots ``sel`` (Q,),
+    f_k = Σ_j P[k, :, j, :] p_j, gathered straight from the inverse (out-of-range slots
+    clipped: callers mask them)."""
+    S = (sl.Minv.shape[0] - 3) // 2
+    dofs = (2 * jnp.clip(sel, 0, S - 1)[:, None] + jnp.arange(2)).reshape(-1)
+    Q = sel.shape[0]
+    return sl.Minv[dofs[:, None], dofs[None, :]].reshape(Q, 2, Q, 2)
 
 
 def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
@@ -264,12 +272,12 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
     K = eps = None
     if held:
         N = model.op.N
-        fit = jnp.linalg.solve(N.T @ N, N.T @ sl.Gc) @ sl.Minv[: 2 * S, : 2 * S] + sl.Minv[2 * S:, : 2 * S]
+        lift = jnp.concatenate([jnp.linalg.solve(N.T @ N, N.T @ sl.Gc), jnp.eye(3, dtype=N.dtype)], axis=1)
+        fit = (lift @ sl.Minv)[:, : 2 * S]
         e = model.axis
         K = jnp.stack([-e[1] * fit[0] + e[0] * fit[1], fit[2]]).reshape(2, S, 2)
-        P = _block_form(sl, S)
-        eps = NEUTRAL_REG * jnp.sum(jnp.where(v.active, jnp.einsum("kaka->k", P), 0.0)) / \
-            jnp.maximum(2 * jnp.sum(v.active), 1)
+        diag = jnp.diagonal(sl.Minv)[: 2 * S].reshape(S, 2).sum(1)
+        eps = NEUTRAL_REG * jnp.sum(jnp.where(v.active, diag, 0.0)) / jnp.maximum(2 * jnp.sum(v.active), 1)
 
     def solve_for(sel, mask):
         """Newton on the slots ``sel`` (Q,) whose ``mask`` is set; the others stay at θ0."""
@@ -304,7 +312,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             R = jnp.where(mask, R, x - take(v.theta0))
             return R, jnp.where(mask[:, None], J, 0.0) + jnp.diag(jnp.where(mask, 0.0, 1.0))
 
-        Psel = jnp.take(jnp.take(_block_form(sl, S), sel, axis=0, mode="clip"), sel, axis=2, mode="clip")
+        Psel = _block_form(sl, sel)
         args = (model, sl, v, d, Psel, K, eps, hold)
         consts = lax.stop_gradient(args)
         tol = consts[0].newton_tol
