@@ -70,7 +70,8 @@ def split_vmap(fn: Callable, in_axes=0, devices=None) -> Callable:
     every member, e.g. the compliance operator). The batch is padded to a multiple of the
     device count with copies of its last member, and the padding is dropped from the result.
 
-    With one device it is ``jax.jit(jax.vmap(fn))``. The returned function is jitted once;
+    With one device it is ``jax.jit(jax.vmap(fn))``. The returned function is jitted once
+    (:func:`jaxsqueeze.compiler.jit`: a top-level call compiles with the CPU options);
     keep it and call it again to reuse the compiled program. Results equal ``jax.vmap``'s
     (each member is the same computation on its own device).
     """
@@ -79,13 +80,15 @@ def split_vmap(fn: Callable, in_axes=0, devices=None) -> Callable:
     import numpy as np
     from jax.sharding import Mesh, PartitionSpec
 
+    from .compiler import jit
+
     devs = list(devices) if devices is not None else jax.local_devices()
     n = len(devs)
     inner = jax.vmap(fn, in_axes=in_axes)
     if n == 1:
-        return jax.jit(inner)
+        return jit(inner)
 
-    @jax.jit
+    @jit
     def call(*args):
         axes = in_axes if isinstance(in_axes, (tuple, list)) else (in_axes,) * len(args)
         if any(a not in (0, None) for a in axes):

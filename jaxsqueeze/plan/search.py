@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import compiler
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
 from ..simulation.status import Status
@@ -64,15 +65,15 @@ def _summary(scene: Scene, qfn, op, x) -> Summary:
     return Summary(res.status, q, res.grip_force, res.final_depth, res.margin)
 
 
-@partial(jax.jit, static_argnums=(1,))
+@compiler.jit(static_argnums=(1,))
 def _batch(scene, qfn, op, X):
     return jax.vmap(lambda x: _summary(scene, qfn, op, x))(X)
 
 
-_one = jax.jit(_summary, static_argnums=(1,))
+_one = compiler.jit(_summary, static_argnums=(1,))
 
 
-@partial(jax.jit, static_argnums=(1,))
+@compiler.jit(static_argnums=(1,))
 def _value_and_grad(scene, qfn, op, u, scale):
     """(Summary, d quality / du (3,)) at scaled coordinates u = x * scale, by ``jax.jacfwd``.
     Module level, so every search on a scene of the same shapes reuses one compiled program."""

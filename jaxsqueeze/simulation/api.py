@@ -3,9 +3,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from dataclasses import dataclass
-from functools import partial
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -19,6 +16,7 @@ from . import validate
 from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
+from .. import compiler
 from ..tracing import is_concrete
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
@@ -137,7 +135,7 @@ def batched_simulate(cfg: Config):
     return run
 
 
-@partial(jax.jit, static_argnames=("cfg",))
+@compiler.jit(static_argnames=("cfg",))
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
     st = batched_simulate(cfg)(op, grasp)

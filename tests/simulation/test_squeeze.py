@@ -283,3 +283,18 @@ def test_jacfwd_in_every_number_matches_central_differences(slanted):
         fd = (float(force(up)) - float(force(down))) / (2 * h)
         assert abs(fd) > 0, name
         np.testing.assert_allclose(J[k], fd, rtol=1e-5, err_msg=name)
+
+
+def test_eager_and_jitted_squeezes_agree(slanted):
+    """An eager squeeze is a top-level program compiled with ``compiler.options()``; inside
+    ``jax.jit`` the same squeeze is the plain program. Both give the same history."""
+    from jaxsqueeze import compiler
+    eager = jsq.squeeze(slanted, trim=False)
+    jitted = jax.jit(lambda mu: jsq.squeeze(slanted.replace(friction=mu), trim=False))(slanted.friction)
+    if compiler.options():
+        assert grasp_mod._run._tuned is not grasp_mod._run.plain
+    assert int(eager.count) == int(jitted.count) and int(eager.n_events) == int(jitted.n_events)
+    np.testing.assert_array_equal(eager.modes, jitted.modes)
+    scale = float(np.abs(eager.forces).max())
+    np.testing.assert_allclose(jitted.forces, eager.forces, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(jitted.events.depth, eager.events.depth, rtol=0, atol=1e-15)
