@@ -12,6 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..tracing import is_concrete
+
 
 def neighbours(loops, m: int):
     """(prev, next) position arrays (m,) of each boundary position along its own loop."""
@@ -49,11 +51,13 @@ def position_table(boundary_nodes, n: int) -> np.ndarray:
 
 def lookup(table, nodes):
     """Positions of node indices ``nodes`` through a :func:`position_table`, −1 for an interior
-    or out-of-range node. Traceable: a bad node gives −1, never another node."""
-    nodes = jnp.asarray(nodes)
+    or out-of-range node. Traceable: a bad node gives −1, never another node (eager numbers
+    give a numpy array, without device round trips)."""
+    xp = np if is_concrete((table, nodes)) else jnp
+    nodes = xp.asarray(nodes)
     n = table.shape[0]
     ok = (nodes >= 0) & (nodes < n)
-    return jnp.where(ok, jnp.asarray(table)[jnp.clip(nodes, 0, n - 1)], -1)
+    return xp.where(ok, xp.asarray(table)[xp.clip(nodes, 0, n - 1)], -1)
 
 
 def positions(boundary_nodes, nodes) -> np.ndarray:

@@ -16,6 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..tracing import is_concrete
+
 
 class FieldMap:
     """Displacement of every node of the object under forces at the contact-capable nodes.
@@ -108,6 +110,13 @@ def field_displacement(op: Compliance, f_hat: jax.Array, g: jax.Array) -> jax.Ar
     """
     if op.field is None:
         raise ValueError("this compliance operator carries no field map; rebuild it with the default options")
+    if is_concrete((f_hat, g)) and np.ndim(f_hat) == 1:   # eager: the host solve (a callback compiles per call)
+        fmap = op.field
+        P = fmap.points
+        f, gn = np.asarray(f_hat, np.float64), np.asarray(g, np.float64)
+        rigid = np.stack([gn[0] - gn[2] * P[:, 1], gn[1] + gn[2] * P[:, 0]], axis=1)
+        u = fmap.solve(f).reshape(-1, 2) + rigid
+        return jnp.asarray(u, dtype=jnp.result_type(f_hat))
     return _field(op.field, f_hat, g)
 
 

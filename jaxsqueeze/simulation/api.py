@@ -36,9 +36,13 @@ def config_of(scene: Scene, history: bool = True) -> Config:
                   history=history)
 
 
-def grasp_of(scene: Scene, op: Compliance) -> Grasp:
+def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:
     """The traced numbers of a scene in SI, with the defaults of :class:`Settings` filled in
-    and the grip as boundary positions (−1 for a node that is not on the boundary)."""
+    and the grip as boundary positions (−1 for a node that is not on the boundary).
+
+    ``invalid`` is the traced validation (:func:`invalid_index`), or −1 with ``validated``:
+    the caller raises on every problem itself (an eager :func:`squeeze` does, with the same
+    rules evaluated in numpy)."""
     dt = op.G.dtype
     f64 = dt == jnp.float64
     L = op.length
@@ -50,7 +54,7 @@ def grasp_of(scene: Scene, op: Compliance) -> Grasp:
     gap_tol = s.gap_tol if s.gap_tol is not None else (1e-9 if f64 else 1e-5) * L
     nodes = scene.boundary_nodes()
     table = boundary.position_table(nodes, int(np.max(nodes)) + 1)
-    grip = boundary.lookup(table, scene.grip) if scene.grip is not None else jnp.zeros(2, jnp.int32)
+    grip = jnp.asarray(boundary.lookup(table, scene.grip)) if scene.grip is not None else jnp.zeros(2, jnp.int32)
     placement = adversary = curve = ()
     if scene.placement is not None or scene.adversary is not None:
         curve = scene.curve()
@@ -68,6 +72,8 @@ def grasp_of(scene: Scene, op: Compliance) -> Grasp:
               depth=depth, step=step, event_tol=event_tol, newton_tol=jnp.asarray(newton_tol, dt),
               gap_tol=jnp.asarray(gap_tol, dt), rotation=rot, invalid=jnp.array(-1, jnp.int32),
               placement=placement, adversary=adversary, curve=curve)
+    if validated:
+        return g
     return dataclasses.replace(g, invalid=invalid_index(g, scene, op))
 
 
@@ -87,10 +93,12 @@ def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
     if not isinstance(scene.mesh, Mesh):
         values.pop("material.nu")                      # a band has no ν
     if scene.placement is None:
-        gp = op.points[jnp.clip(grasp.grip, 0, op.m - 1)] * op.length
-        values.update({"grip_slots": grasp.grip, "n_boundary": op.m, "grip_distance": jnp.linalg.norm(gp[1] - gp[0]),
-                       "grip.overlap": validate.fingertip_overlap(op.points * op.length, op.normals, grasp.grip,
-                                                                  grasp.radius)})
+        xp = np if is_concrete((grasp.grip, grasp.radius, op.points)) else jnp    # eager: no tiny device ops
+        P, grip = xp.asarray(op.points) * xp.asarray(op.length), xp.asarray(grasp.grip)
+        gp = P[xp.clip(grip, 0, op.m - 1)]
+        values.update({"grip_slots": grip, "n_boundary": op.m, "grip_distance": xp.linalg.norm(gp[1] - gp[0]),
+                       "grip.overlap": validate.fingertip_overlap(P, xp.asarray(op.normals), grip,
+                                                                  xp.asarray(grasp.radius), xp=xp)})
     else:
         values.update({"placement.s": grasp.placement[0], "placement.angle": grasp.placement[1]})
     if scene.adversary is not None:
@@ -175,7 +183,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     if concrete and scene.placement is None:
         check_grip(scene, op)
     cfg = config_of(scene, history)
-    grasp = grasp_of(scene, op)
+    grasp = grasp_of(scene, op, validated=concrete)
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)

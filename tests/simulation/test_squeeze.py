@@ -220,6 +220,21 @@ def test_second_call_does_not_recompile(slanted):
     assert grasp_mod._run._cache_size() == before
 
 
+def test_a_second_eager_squeeze_compiles_nothing(slanted):
+    """Nothing on the eager path (validation, the compiled core, the full displacement field,
+    trimming) compiles again for new numbers: no per-call host callback or tiny programs."""
+    jsq.squeeze(slanted)
+    compiled = []
+    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        res = jsq.squeeze(slanted.replace(friction=0.25, depth=0.011))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert res.displacement is not None and res.displacement.shape == slanted.mesh.points.shape
+    assert compiled == []
+
+
 def _primitives(scene):
     """Counter of the primitives in the compiled squeeze's program (all nested jaxprs)."""
     import collections
