@@ -1,4 +1,6 @@
 """compiler.jit: top-level calls compile with the accepted CPU options, traced calls stay plain."""
+import os
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -19,8 +21,10 @@ def _f(x, k):
 
 
 def test_top_level_calls_use_the_options_and_traced_calls_the_plain_jit(fresh_options):
-    if jax.default_backend() == "cpu":
-        assert compiler.options() == tuple(sorted(compiler.CPU_OPTIONS.items()))
+    full = tuple(sorted(compiler.CPU_OPTIONS.items()))
+    assert compiler.options() in ((), full)
+    if jax.default_backend() == "cpu" and "--xla_cpu_use_fusion_emitters=false" in os.environ.get("XLA_FLAGS", ""):
+        assert compiler.options() == full      # conftest's probe found that this jaxlib knows the option
     f = compiler.jit(_f, static_argnums=(1,))
     x = jnp.linspace(0.0, 1.0, 5)
     np.testing.assert_array_equal(f(x, 2.0), _f(x, 2.0))
