@@ -35,20 +35,21 @@ class FieldMap:
         self.n = self.points.shape[0]
 
 
-def rigid_modes(points):
-    """Rigid-mode rows (2k, 3) at positions ``points`` (k, 2), DOFs interleaved.
+def rigid_modes(points, xp=jnp):
+    """Rigid-mode rows (2k, 3) at positions ``points`` (k, 2), DOFs interleaved (``xp``: numpy
+    for concrete points outside JAX).
 
     Columns: unit x translation, unit y translation, and small rotation about the origin
     (the node centroid), so ``g`` reads (t_x, t_y, angle) in the units of ``points``.
     Unnormalized on purpose: entries stay O(1) in scaled units however many nodes there are,
     which keeps the bordered matrix of eq. (4) well conditioned (DESIGN 2.3).
     """
-    points = jnp.asarray(points)
+    points = xp.asarray(points)
     k = points.shape[0]
-    one, zero = jnp.ones(k, points.dtype), jnp.zeros(k, points.dtype)
-    rows_x = jnp.stack([one, zero, -points[:, 1]], axis=1)
-    rows_y = jnp.stack([zero, one, points[:, 0]], axis=1)
-    return jnp.stack([rows_x, rows_y], axis=1).reshape(2 * k, 3)
+    one, zero = xp.ones(k, points.dtype), xp.zeros(k, points.dtype)
+    rows_x = xp.stack([one, zero, -points[:, 1]], axis=1)
+    rows_y = xp.stack([zero, one, points[:, 0]], axis=1)
+    return xp.stack([rows_x, rows_y], axis=1).reshape(2 * k, 3)
 
 
 @jax.tree_util.register_dataclass
@@ -112,11 +113,8 @@ def field_displacement(op: Compliance, f_hat: jax.Array, g: jax.Array) -> jax.Ar
         raise ValueError("this compliance operator carries no field map; rebuild it with the default options")
     if is_concrete((f_hat, g)) and np.ndim(f_hat) == 1:   # eager: the host solve (a callback compiles per call)
         fmap = op.field
-        P = fmap.points
-        f, gn = np.asarray(f_hat, np.float64), np.asarray(g, np.float64)
-        rigid = np.stack([gn[0] - gn[2] * P[:, 1], gn[1] + gn[2] * P[:, 0]], axis=1)
-        u = fmap.solve(f).reshape(-1, 2) + rigid
-        return jnp.asarray(u, dtype=jnp.result_type(f_hat))
+        u = fmap.solve(np.asarray(f_hat, np.float64)) + rigid_modes(fmap.points, xp=np) @ np.asarray(g, np.float64)
+        return jnp.asarray(u.reshape(-1, 2), dtype=jnp.result_type(f_hat))
     return _field(op.field, f_hat, g)
 
 
