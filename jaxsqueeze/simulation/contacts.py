@@ -61,6 +61,7 @@ class Slots(NamedTuple):
     """The contact set in S fixed slots (DESIGN 2.4).
 
     node: (S,) int32 boundary position of each slot's node, −1 for an empty slot.
+    slot: (m,) int32 the slot of each boundary node, S for a node without one.
     Minv: (2S + 3, 2S + 3) inverse of the bordered matrix of eq. (4) over the slots (empty
         slots: identity block).
     Gc: (2m, 2S) compliance columns G[:, slot DOFs] (zero for empty slots): the boundary
@@ -68,12 +69,33 @@ class Slots(NamedTuple):
     """
 
     node: jax.Array
+    slot: jax.Array
     Minv: jax.Array
     Gc: jax.Array
 
     @property
     def active(self):
         return self.node >= 0
+
+    def spread(self):
+        """``put(a, fill=0)``: slot values a (S, ...) placed at their nodes, (m, ...) with ``fill``
+        (a scalar or (m, ...)) at the other nodes.
+
+        A gather through the node → slot map, not a scatter of the slots: on the CPU XLA runs a
+        scatter as a small loop with its own buffers, and the ``jvp`` of a scatter whose indices
+        may repeat is three of them; a gather fuses with what uses it."""
+        S = self.node.shape[0]
+        return _gather(jnp.minimum(self.slot, S - 1), self.slot < S)
+
+
+def _gather(src, on):
+    """``put(a, fill=0)``: (n, ...) with a[src] where ``on`` (n,) and ``fill`` elsewhere."""
+    def put(a, fill=0):
+        a = jnp.asarray(a)
+        mask = on.reshape(on.shape + (1,) * (a.ndim - 1))
+        return jnp.where(mask, a[src], jnp.asarray(fill, a.dtype))
+
+    return put
 
 
 def _dofs(pos):
@@ -97,7 +119,8 @@ def pair(op: Compliance, S: int, i, j) -> Slots:
     Minv = jnp.eye(n, dtype=dt).at[2 * S:, 2 * S:].set(0.0).at[where[:, None], where[None, :]].set(inv7)
     Gc = jnp.zeros((op.G.shape[0], 2 * S), dt).at[:, :4].set(op.G[:, d4])
     node = jnp.full(S, -1, jnp.int32).at[0].set(jnp.int32(i)).at[1].set(jnp.int32(j))
-    return Slots(node, Minv, Gc)
+    slot = jnp.full(op.m, S, jnp.int32).at[i].set(0).at[j].set(1)
+    return Slots(node, slot, Minv, Gc)
 
 
 def activate(op: Compliance, sl: Slots, k, pos) -> Slots:
@@ -106,13 +129,14 @@ def activate(op: Compliance, sl: Slots, k, pos) -> Slots:
     b = jnp.concatenate([sl.Gc[d].T, op.N[d].T], axis=0)          # (2S + 3, 2)
     Minv = inverse_activate(sl.Minv, k, b, op.G[d][:, d])
     Gc = lax.dynamic_update_slice(sl.Gc, op.G[:, d], (0, 2 * k))
-    return Slots(sl.node.at[k].set(jnp.int32(pos)), Minv, Gc)
+    return Slots(sl.node.at[k].set(jnp.int32(pos)), sl.slot.at[pos].set(jnp.int32(k)), Minv, Gc)
 
 
 def deactivate(sl: Slots, k) -> Slots:
     """Slot k (active) is emptied: the inverse downdated by the Schur complement."""
     Gc = lax.dynamic_update_slice(sl.Gc, jnp.zeros((sl.Gc.shape[0], 2), sl.Gc.dtype), (0, 2 * k))
-    return Slots(sl.node.at[k].set(-1), inverse_deactivate(sl.Minv, k), Gc)
+    S = sl.node.shape[0]
+    return Slots(sl.node.at[k].set(-1), sl.slot.at[sl.node[k]].set(S), inverse_deactivate(sl.Minv, k), Gc)
 
 
 def update(op: Compliance, sl: Slots, old_on, new_on):
@@ -133,7 +157,7 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
 
         def drop():
             p = jnp.argmax(leave)
-            return deactivate(sl, jnp.argmax(sl.node == p)), leave.at[p].set(False), join, over
+            return deactivate(sl, sl.slot[p].astype(int)), leave.at[p].set(False), join, over
 
         def add():
             p = jnp.argmax(join)
@@ -279,12 +303,14 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
         diag = jnp.diagonal(sl.Minv)[: 2 * S].reshape(S, 2).sum(1)
         eps = NEUTRAL_REG * jnp.sum(jnp.where(v.active, diag, 0.0)) / jnp.maximum(2 * jnp.sum(v.active), 1)
 
-    def solve_for(sel, mask):
-        """Newton on the slots ``sel`` (Q,) whose ``mask`` is set; the others stay at θ0."""
+    def solve_for(sel, mask, back, on):
+        """Newton on the slots ``sel`` (Q,) whose ``mask`` is set; the others stay at θ0.
+        ``back`` (S,): each slot's position in ``sel``, where ``on`` (S,)."""
         take = lambda a: jnp.take(a, sel, axis=0, mode="clip")  # noqa: E731
+        put = _gather(back, on)
 
         def angles(x, v):
-            return v.theta0.at[sel].set(jnp.where(mask, x, take(v.theta0)), mode="drop")
+            return put(x, v.theta0)
 
         def system(x, m, sl, v, dd, Psel, K, eps, hold):
             """(R (Q,), J (Q, Q)) of system S at the unknowns x."""
@@ -336,7 +362,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
         if cfg.slip_events:
             _, J_t = system(_value_and_tangent(x_c, x), *args)
             _, R_eps = jax.jvp(lambda dd: system(x, *args[:3], dd, *args[4:])[0], (d,), (jnp.ones_like(d),))
-            rate = rate.at[sel].set(jnp.where(mask, -linalg.solve(J_t, R_eps), 0.0), mode="drop")
+            rate = put(-linalg.solve(J_t, R_eps))
         th = angles(x, v)
         drift = jnp.zeros(2, zero.dtype)
         if held:
@@ -348,10 +374,11 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
     n = jnp.sum(sliding)
     still = lambda: (v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0),  # noqa: E731
                      jnp.zeros(2, zero.dtype))
-    full = lambda: solve_for(jnp.arange(S), sliding)  # noqa: E731
+    full = lambda: solve_for(jnp.arange(S), sliding, jnp.arange(S), sliding)  # noqa: E731
     if S <= COMPACT:
         return lax.cond(n > 0, full, still)
-    compact = lambda: solve_for(jnp.nonzero(sliding, size=COMPACT, fill_value=S)[0], jnp.arange(COMPACT) < n)  # noqa: E731
+    compact = lambda: solve_for(jnp.nonzero(sliding, size=COMPACT, fill_value=S)[0], jnp.arange(COMPACT) < n,  # noqa: E731
+                                jnp.clip(jnp.cumsum(sliding) - 1, 0, COMPACT - 1), sliding)
     return lax.switch(jnp.where(n == 0, 0, jnp.where(n <= COMPACT, 1, 2)), [still, compact, full])
 
 
@@ -390,8 +417,8 @@ def solve(model: Model, sl: Slots, ns: Nodes, d, hold=None) -> Solution:
     f, g = _linear(model, sl, v, p)
     f = jnp.where(v.active[:, None], f, 0.0)
     u = (sl.Gc @ f.reshape(-1) + op.N @ g).reshape(m, 2)
-    safe = jnp.where(v.active, v.idx, m)
-    F = jnp.zeros((m, 2), f.dtype).at[safe].set(f, mode="drop")
+    put = sl.spread()
+    F = put(f)
 
     x = op.points + u
     gaps = jnp.min(gap_to_fingers(model, x, d), axis=1)
@@ -411,9 +438,8 @@ def solve(model: Model, sl: Slots, ns: Nodes, d, hold=None) -> Solution:
         k_slot = jnp.where(fn < other, 1, jnp.where(v.mode == STICK, 2, 3))
     else:
         e_slot, k_slot = fn, jnp.ones_like(v.mode)
-    e = eA.at[safe].set(e_slot, mode="drop")
-    kind = jnp.zeros(m, jnp.int32).at[safe].set(k_slot, mode="drop")
-    put = lambda a: jnp.zeros(m, f.dtype).at[safe].set(a, mode="drop")  # noqa: E731
+    e = put(e_slot, eA)
+    kind = put(k_slot.astype(jnp.int32))
     e = jnp.where((ns.mode == FREE) | (kind > 0), e, jnp.inf)
     del S
     return Solution(th, f, g, ok, u, F, e, kind, put(fn), put(ft), put(srate), gaps, iters, resid, drift)

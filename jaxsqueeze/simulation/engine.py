@@ -209,7 +209,7 @@ def reconcile(model: Model, st: State) -> State:
     """Bring the contact slots to the contact set of the per-node modes (the one place where
     slots change: stages change modes; the slots follow, one bordering update per node)."""
     m = model.op.m
-    was = jnp.zeros(m, bool).at[jnp.where(st.slots.active, st.slots.node, m)].set(True, mode="drop")
+    was = st.slots.slot < model.cfg.capacity
     slots, over = contacts.update(model.op, st.slots, was, st.nodes.mode > FREE)
     fault = jnp.where(over & (st.fault == RUNNING), Status.OVERFLOW, st.fault).astype(jnp.int32)
     return _with(st, slots=slots, fault=fault)
@@ -219,9 +219,7 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
     """Adopt a solved configuration at depth d as the next row (slip angles move, anchors stay),
     and record it (:func:`finish`)."""
     d = jnp.where(d >= model.D * (1 - 1e-12), model.D, d)     # an event located at the target ends there
-    sl = st.slots
-    safe = jnp.where(sl.active, sl.node, model.op.m)
-    angle = st.nodes.theta.at[safe].set(sol.th, mode="drop")
+    angle = st.slots.spread()(sol.th, st.nodes.theta)
     armed = _arm(st.nodes.armed, sol)
     s = st.stats
     stats = s._replace(newton_iters=s.newton_iters + sol.iters, newton_max=jnp.maximum(s.newton_max, sol.iters),
@@ -348,9 +346,7 @@ def apply_event(model: Model, st: State) -> State:
     th = b.th + t * b.dth
     x = b.x + t * b.dx
     ns = st.nodes
-    sl = st.slots
-    safe = jnp.where(sl.active, sl.node, m)
-    theta = ns.theta.at[safe].set(th, mode="drop")
+    theta = st.slots.spread()(th, ns.theta)
     kinds = jnp.where(ns.mode == FREE, 0, b.kind)
     near, ang = _attach(model, x, d_star)
     added = flag & (kinds == 0)

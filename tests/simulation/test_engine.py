@@ -78,7 +78,13 @@ def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, touc
         st = _step(wide, st)
         assert int(st.stats.bracket_iters) <= int(model.cfg.bisect_iters)
     b = st.bracket                                    # the final bracket (apply_event keeps it)
-    assert float(b.hi - b.lo) <= float(model.ev_tol) or int(b.iters) >= model.cfg.bisect_iters
+    # closed by its width, or by Newton from the crossed end: every crossed function's Newton
+    # crossing lies within the tolerance below hi (its rate there falling)
+    e_hi, de_hi, tol = np.asarray(b.e_hi), np.asarray(b.de_hi), float(model.ev_tol)
+    crossed = e_hi < 0
+    newton = float(b.hi) - e_hi[crossed] / de_hi[crossed]
+    by_newton = np.all(de_hi[crossed] < 0) and np.all(newton >= max(float(b.hi) - tol, float(b.lo)))
+    assert float(b.hi - b.lo) <= tol or by_newton or int(b.iters) >= model.cfg.bisect_iters
     assert np.all(np.asarray(b.e_lo) >= 0) and np.any(np.asarray(b.e_hi) < 0)
     assert int(st.phase) == engine.CHECK and int(st.n_ev) >= 1
     assert np.all(np.asarray(st.events[2])[: int(st.n_ev)] == 0)           # kind A
@@ -86,6 +92,10 @@ def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, touc
     added = np.asarray(st.added)
     assert added.sum() == int(st.n_ev) and np.all(np.asarray(st.nodes.mode)[added] == STICK)
     assert int(np.sum(np.asarray(st.slots.active))) == 2 + int(st.n_ev)     # reconcile bordered them in
+    node, slot, S = np.asarray(st.slots.node), np.asarray(st.slots.slot), int(model.cfg.capacity)
+    on = np.flatnonzero(node >= 0)                   # the node -> slot map inverts slot -> node
+    np.testing.assert_array_equal(slot[node[on]], on)
+    assert np.sum(slot < S) == on.size and np.all(np.asarray(st.nodes.mode)[slot < S] > FREE)
     # apply_event alone on the last bracket gives the same state
     again = jax.jit(engine.apply_event)(wide, dataclasses.replace(st, bracket=b, phase=jnp.asarray(engine.LOCATE),
                                                                   nodes=touched.nodes, n_ev=touched.n_ev,
@@ -126,6 +136,41 @@ def test_stats_and_records_of_a_full_squeeze(model):
     assert int(s.events) >= 1 and int(s.bracket_iters) >= int(s.events)
     rigid = np.asarray(st.hist[8])[int(st.count) - 1]
     np.testing.assert_allclose(rigid, np.asarray(st.g), rtol=0, atol=0)   # the rigid part is recorded
+    # after every contact made and broken, the node -> slot map still inverts the slots and
+    # holds exactly the contact set
+    node, slot, mode = np.asarray(st.slots.node), np.asarray(st.slots.slot), np.asarray(st.nodes.mode)
+    on = np.flatnonzero(node >= 0)
+    np.testing.assert_array_equal(slot[node[on]], on)
+    np.testing.assert_array_equal(slot < model.cfg.capacity, mode > FREE)
+
+
+def test_update_makes_and_breaks_contacts_keeping_the_inverse_and_the_node_map(model):
+    """contacts.update from the grip pair to four contacts, then two leave and one joins: the
+    node -> slot map inverts the slots, and the bordered inverse kept by bordering updates equals
+    the inverse of the bordered matrix of eq. (4) built afresh for the slots."""
+    op, S = model.op, model.cfg.capacity
+    i, j = (int(v) for v in np.asarray(model.grip))
+    a, b, c = (i + 1) % op.m, (i - 1) % op.m, (j + 1) % op.m
+    on = lambda *ps: jnp.zeros(op.m, bool).at[jnp.array(ps)].set(True)  # noqa: E731
+    upd = jax.jit(lambda sl, old, new: engine.contacts.update(op, sl, old, new))
+    sl, over = upd(engine.contacts.pair(op, S, i, j), on(i, j), on(i, j, a, b))
+    sl, over2 = upd(sl, on(i, j, a, b), on(j, a, c))
+    assert not bool(over) and not bool(over2)
+    node, slot = np.asarray(sl.node), np.asarray(sl.slot)
+    act = np.flatnonzero(node >= 0)
+    assert sorted(node[act].tolist()) == sorted([j, a, c])
+    np.testing.assert_array_equal(slot[node[act]], act)
+    assert np.sum(slot < S) == 3
+    G, N = np.asarray(op.G), np.asarray(op.N)
+    M = np.zeros((2 * S + 3, 2 * S + 3))
+    M[: 2 * S, : 2 * S] = np.eye(2 * S)
+    for k in act:
+        dk = [2 * node[k], 2 * node[k] + 1]
+        for q in act:
+            M[2 * k: 2 * k + 2, 2 * q: 2 * q + 2] = G[np.ix_(dk, [2 * node[q], 2 * node[q] + 1])]
+        M[2 * k: 2 * k + 2, 2 * S:] = N[dk]
+        M[2 * S:, 2 * k: 2 * k + 2] = N[dk].T
+    np.testing.assert_allclose(np.asarray(sl.Minv), np.linalg.inv(M), rtol=0, atol=1e-8 * np.abs(np.linalg.inv(M)).max())
 
 
 def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
