@@ -13,6 +13,11 @@ stick/slip, 15 mm). Three parts:
   trace + lower + compile time and HLO size): ``contacts.solve`` and its ``jvp``, ``reconcile``
   with one new contact (the bordering update of the inverse), ``apply_event``, ``finish``,
   ``step`` and ``init``.
+* **Executed operations.** One run of the compiled squeeze under ``jax.profiler`` with
+  XLA:CPU's per-operation trace events on: the operations (thunks) it executes per loop
+  iteration, the copies among them, by part of the loop body (the named scopes of
+  ``engine.step``) and by kind. On the CPU each costs a dispatch of a few tenths of a
+  microsecond, which at this problem size is most of the time.
 * **Time per stage.** Each of those stages jitted alone, best of ``--reps`` calls after its
   compile, on the state of a recorded row of the real squeeze (the contact set there, the next
   step's depth). Times are multiplied by how often a squeeze calls them (from its ``stats``)
@@ -82,6 +87,61 @@ def hlo_by_scope(text: str) -> list:
                 break
     untagged = hlo_stats(text)["hlo_instructions"] - len(names)
     return [(label, c[label]) for label, _ in SCOPES] + [("(no op_name: parameters, tuples, constants)", untagged)]
+
+
+PARTS = [  # (label, regex on op_name) for executed operations, first match wins
+    ("solve: slip-angle Newton loop", r"/solve/.*newton"),
+    ("solve: the rest of the configuration solve and its jvp", r"/solve/"),
+    ("phase switch (advance, locate_event + apply_event, check, prime)", r"/phase/"),
+    ("accept (record the row, status)", r"/accept/"),
+    ("reconcile (bordering updates of the contact slots)", r"/reconcile/"),
+    ("target (the depth of the solve)", r"/target/"),
+]
+
+
+def executed_ops(lowered, args, loop_iterations, tmp):
+    """What one compiled squeeze executes on the CPU, from a profiler trace: XLA:CPU runs a
+    program as a sequence of operations ("thunks": a fusion, a dot, a LAPACK call, a copy,
+    a loop or a conditional), each with a dispatch cost of a few tenths of a microsecond.
+    Returns [(label, count per loop iteration)]: every operation, the copies among them,
+    by part of the loop body (``PARTS``, from the op_name of the HLO instruction), and the
+    most frequent kinds."""
+    import glob
+
+    import jax
+    from jax.profiler import ProfileData
+
+    from jaxsqueeze import compiler
+    comp = lowered.compile(compiler_options=dict(compiler.options()) | {"xla_cpu_enable_xprof_traceme": True})
+    jax.block_until_ready(comp(*args))
+    jax.profiler.start_trace(tmp)
+    jax.block_until_ready(comp(*args))
+    jax.profiler.stop_trace()
+    names = collections.Counter()
+    for f in glob.glob(os.path.join(tmp, "**", "*.xplane.pb"), recursive=True):
+        for plane in ProfileData.from_file(f).planes:
+            for line in plane.lines:
+                if line.name.startswith("tf_XLA"):
+                    names.update(ev.name for ev in line.events
+                                 if not ev.name.startswith(("ThunkExecutor", "end:")))
+    op_name = dict(re.findall(r'^\s+(?:ROOT )?%?(\S+) = .*?op_name="([^"]*)"', comp.as_text(), re.M))
+    parts = collections.Counter()
+    for name, n in names.items():
+        label = "copies between control-flow regions (no op_name)" if name.startswith("copy") else "other"
+        for lab, rx in PARTS:
+            if re.search(rx, op_name.get(name, "")):
+                label = lab
+                break
+        parts[label] += n
+    kinds = collections.Counter()
+    for name, n in names.items():
+        kinds[re.sub(r"(\.\d+)+$", "", name)] += n
+    per = lambda n: n / loop_iterations  # noqa: E731
+    total = sum(names.values())
+    return ([("all operations", per(total)), ("copies", per(sum(n for k, n in names.items() if k.startswith("copy"))))]
+            + [(lab, per(parts[lab])) for lab, _ in PARTS] + [(lab, per(parts[lab])) for lab in
+                                                                ("copies between control-flow regions (no op_name)", "other")]
+            + [(f"kind: {k}", per(n)) for k, n in kinds.most_common(8)])
 
 
 def best(f, *args, reps=7):
@@ -179,6 +239,12 @@ def main(argv=None):
     for label, n in hlo_by_scope(text):
         rec("hlo_scope", label, count=n, share=n / hs["hlo_instructions"])
 
+    # ---- operations executed per loop iteration (one profiler trace of the compiled squeeze)
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, n in executed_ops(G._run.lower(op0, gr, cfg), (op0, gr), int(s.solves), tmp):
+            rec("executed", label, per_iteration=n)
+
     # ---- a representative row: the recorded row with the most sliding contacts
     modes = np.asarray(st.hist[1][:rows])
     k = a.row if a.row is not None else int(np.argmax((modes >= 2).sum(1) * 1000 + (modes > 0).sum(1)))
@@ -255,6 +321,11 @@ def report(out, info):
     for r in out:
         if r["part"] == "hlo_scope":
             print(f"| {r['item']} | {r['count']} | {100 * r['share']:.0f} % |")
+    print("\n| executed XLA operations per loop iteration | count |")
+    print("|---|---:|")
+    for r in out:
+        if r["part"] == "executed":
+            print(f"| {r['item']} | {r['per_iteration']:.1f} |")
     for r in out:
         if r["part"] in ("squeeze", "size", "row", "budget", "reference"):
             print(r)

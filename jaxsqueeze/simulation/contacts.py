@@ -353,7 +353,8 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             return x - dx, it + 1, jnp.max(jnp.abs(dx))
 
         start = jnp.where(jnp.any(mask), jnp.array(jnp.inf, zero.dtype), zero)
-        x_c, it, last = lax.while_loop(cond, body, (take(consts[2].theta0), jnp.array(0, jnp.int32), start))
+        with jax.named_scope("newton"):
+            x_c, it, last = lax.while_loop(cond, body, (take(consts[2].theta0), jnp.array(0, jnp.int32), start))
         # the implicit-function step (see the docstring), then dθ/dε at the solution: its
         # Jacobian has the value at x_c but the tangent of x, so d(dθ/dε)/dε is exact too
         R, J = system(x_c, *args)

@@ -197,12 +197,17 @@ def target(model: Model, st: State):
 def step(model: Model, st: State) -> State:
     """One loop iteration: one solve at :func:`target`, then the phase's update, which may
     accept the solve as the next row."""
-    d = target(model, st)
-    sol, dsol = _solve(model, st, d)
+    with jax.named_scope("target"):      # (the scopes name the parts in profiles: profile_row.py)
+        d = target(model, st)
+    with jax.named_scope("solve"):
+        sol, dsol = _solve(model, st, d)
     st = _with(st, stats=st.stats._replace(solves=st.stats.solves + 1))
-    st, take = lax.switch(st.phase, [advance, locate_event, check, prime], model, st, sol, dsol, d)
-    st = lax.cond(take, lambda: _accept(model, st, sol, dsol, d), lambda: st)
-    return reconcile(model, st)
+    with jax.named_scope("phase"):
+        st, take = lax.switch(st.phase, [advance, locate_event, check, prime], model, st, sol, dsol, d)
+    with jax.named_scope("accept"):
+        st = lax.cond(take, lambda: _accept(model, st, sol, dsol, d), lambda: st)
+    with jax.named_scope("reconcile"):
+        return reconcile(model, st)
 
 
 def reconcile(model: Model, st: State) -> State:
