@@ -241,7 +241,21 @@ def _linear(model: Model, sl: Slots, v: _View, p):
     # matrix on every call (on the CPU a sliced dot operand is materialised first)
     rhs = jnp.concatenate([jnp.where(v.active[:, None], p, 0.0).reshape(-1), jnp.zeros(3, p.dtype)])
     z = sl.Minv @ rhs
+    if rhs.dtype == jnp.float32:
+        # the inverse kept by bordering updates drifts in float32 (3e-4 after ~60 contacts made
+        # and broken, docs/numerics.md §3): one step of iterative refinement against M itself
+        z = z + sl.Minv @ (rhs - _bordered_times(model, sl, v, z))
     return z[: 2 * S].reshape(S, 2), z[2 * S:]
+
+
+def _bordered_times(model: Model, sl: Slots, v: _View, z):
+    """M z for the bordered matrix M of eq. (4) over the slots (identity blocks at empty slots)."""
+    S = v.idx.shape[0]
+    f, g = z[: 2 * S], z[2 * S:]
+    dofs = (2 * v.idx[:, None] + jnp.arange(2)).reshape(-1)
+    on = jnp.repeat(v.active, 2)
+    B = jnp.where(on[:, None], model.op.N[dofs], 0.0)
+    return jnp.concatenate([jnp.where(on, sl.Gc[dofs] @ f + B @ g, f), B.T @ f])
 
 
 def _block_form(sl: Slots, sel):
