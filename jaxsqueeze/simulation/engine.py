@@ -14,8 +14,9 @@ The loop is a driver over named stages, each a pure function of the model and a 
   - :func:`advance` (phase ADVANCE): the solve at d + h. If no event function changed sign,
     the row is accepted; otherwise the bracket [d, d + h] is opened.
   - :func:`locate_event` (phase LOCATE): the solve at the next estimate of the earliest
-    crossing (Newton on the event function with the rate from the solve, safeguarded by the
-    secant and bisection), until the bracket is ``event_tol`` wide; then :func:`apply_event`.
+    crossing (the root of the cubic through the event function's values and rates at the
+    bracket's ends, safeguarded by Newton, the secant and bisection), until the bracket is
+    ``event_tol`` wide or Newton from its crossed end is converged; then :func:`apply_event`.
   - :func:`apply_event`: the event depth refined by one implicit-function step (so it carries
     its derivative), every event flagged there applied (A new contact, B break, C stick→slip,
     D slip→stick), the contact slots updated and the events logged.
@@ -272,10 +273,13 @@ def prime(model: Model, st: State, sol: Solution, dsol: Solution, d):
 def estimate(model: Model, b: Bracket):
     """The next depth to solve at while locating the earliest crossing in [lo, hi].
 
-    For every node whose event function crossed by hi: a Newton step from hi with its rate
-    there (from lo when that one lands inside the bracket instead), else the secant; the
-    earliest candidate is taken. Near an end it aims a quarter tolerance past its estimate,
-    so the next solve closes the bracket from the other side; every fourth iteration bisects.
+    For every node whose event function crossed by hi: the root of its cubic Hermite
+    interpolant on [lo, hi] (values and rates at both ends, :func:`_hermite_root`); where that
+    fails, a Newton step from hi with its rate there (from lo when that one lands inside the
+    bracket instead), else the secant; the earliest candidate is taken. The solve goes a
+    quarter tolerance past it, so that it lands on the crossed side and the bracket can close
+    from there (:func:`_converged`); within two quarters of hi it goes a quarter before, to
+    close the bracket from the other side. Every fourth iteration bisects.
     """
     lo, hi, tol = b.lo, b.hi, model.ev_tol
     w = hi - lo
@@ -287,6 +291,8 @@ def estimate(model: Model, b: Bracket):
     sec = lo + w * b.e_lo / jnp.where(span > 0, span, 1.0)
     cand = jnp.where((b.de_hi < 0) & inside(n_hi), n_hi,
                      jnp.where((b.de_lo < 0) & (b.e_lo > 0) & inside(n_lo), n_lo, sec))
+    herm = _hermite_root(b)
+    cand = jnp.where(inside(herm), herm, cand)
     est = jnp.min(jnp.where(flag, cand, jnp.inf))
     est = jnp.where(jnp.isfinite(est), est, lo + 0.5 * w)
     q = 0.25 * tol
@@ -309,6 +315,23 @@ def _converged(model: Model, b: Bracket):
     past the root), so no solve on the other side is needed to close the bracket."""
     flag = b.e_hi < 0
     return jnp.any(flag) & jnp.all(~flag | (_newton_from_hi(b) >= jnp.maximum(b.hi - model.ev_tol, b.lo)))
+
+
+def _hermite_root(b: Bracket, iters: int = 4):
+    """(m,) the crossing of each event function's cubic Hermite interpolant on [lo, hi] (its
+    values and rates at both ends): Newton on the cubic from the secant; NaN where that leaves
+    the bracket or the data are not a fall through zero (e_lo > 0 > e_hi)."""
+    w = b.hi - b.lo
+    a0, a1, b0, b1 = b.e_lo, w * b.de_lo, b.e_hi, w * b.de_hi
+    span = a0 - b0
+    t = jnp.clip(a0 / jnp.where(span > 0, span, 1.0), 0.0, 1.0)
+    for _ in range(iters):
+        t2, t3 = t * t, t * t * t
+        p = (2 * t3 - 3 * t2 + 1) * a0 + (t3 - 2 * t2 + t) * a1 + (3 * t2 - 2 * t3) * b0 + (t3 - t2) * b1
+        dp = (6 * t2 - 6 * t) * a0 + (3 * t2 - 4 * t + 1) * a1 + (6 * t - 6 * t2) * b0 + (3 * t2 - 2 * t) * b1
+        t = t - p / jnp.where(dp < 0, dp, -1.0)
+    ok = (a0 > 0) & (b0 < 0) & (t > 0) & (t < 1)
+    return jnp.where(ok, b.lo + t * w, jnp.nan)
 
 
 def locate_event(model: Model, st: State, sol: Solution, dsol: Solution, dm) -> State:

@@ -104,6 +104,26 @@ def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, touc
     assert float(again.d_star) == float(st.d_star)
 
 
+def test_the_bracket_estimate_finds_the_root_of_a_cubic_from_its_ends():
+    """engine._hermite_root: the cubic Hermite interpolant of an event function from its values
+    and rates at the bracket's ends is the function itself when that is a cubic, so Newton on it
+    finds the root to round-off; data that are no fall through zero give NaN (the estimate then
+    falls back to Newton from an end or the secant)."""
+    lo, hi = 0.2, 0.7
+    roots = np.array([0.25, 0.46, 0.69])
+    e = lambda d: -(d - roots) * (1.0 + 3.0 * (d - 0.4) ** 2)            # noqa: E731  falling cubics
+    de = lambda d: -(1.0 + 3.0 * (d - 0.4) ** 2) - 6.0 * (d - roots) * (d - 0.4)  # noqa: E731
+    z = jnp.zeros(3)
+    b = engine.Bracket(z, jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(e(lo)), jnp.asarray(de(lo)),
+                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z, z, z,
+                       jnp.asarray(0, jnp.int32))
+    np.testing.assert_allclose(np.asarray(engine._hermite_root(b)), roots, rtol=0, atol=1e-12)
+    # a function already below zero at lo, or still above it at hi, has no crossing to estimate
+    b2 = b._replace(e_lo=b.e_lo.at[0].set(-1.0), e_hi=b.e_hi.at[1].set(0.5))
+    r = np.asarray(engine._hermite_root(b2))
+    assert np.isnan(r[0]) and np.isnan(r[1]) and abs(r[2] - roots[2]) < 1e-12
+
+
 def test_finish_decides_the_status_in_one_order(model, touched):
     fin = jax.jit(engine.finish)
     ns = touched.nodes
