@@ -285,11 +285,11 @@ def estimate(model: Model, b: Bracket):
     w = hi - lo
     flag = b.e_hi < 0
     inside = lambda t: (t > lo) & (t < hi)  # noqa: E731
-    n_hi = hi - b.e_hi / jnp.where(b.de_hi < 0, b.de_hi, -1.0)
+    n_hi = _newton_from_hi(b)
     n_lo = lo - b.e_lo / jnp.where(b.de_lo < 0, b.de_lo, -1.0)
     span = b.e_lo - b.e_hi
     sec = lo + w * b.e_lo / jnp.where(span > 0, span, 1.0)
-    cand = jnp.where((b.de_hi < 0) & inside(n_hi), n_hi,
+    cand = jnp.where(inside(n_hi), n_hi,
                      jnp.where((b.de_lo < 0) & (b.e_lo > 0) & inside(n_lo), n_lo, sec))
     herm = _hermite_root(b)
     cand = jnp.where(inside(herm), herm, cand)
@@ -335,8 +335,9 @@ def _hermite_root(b: Bracket, iters: int = 4):
 
 
 def locate_event(model: Model, st: State, sol: Solution, dsol: Solution, dm) -> State:
-    """Phase LOCATE: shrink the bracket with the solve at ``dm``; once it is ``event_tol`` wide
-    (or after ``bisect_iters`` solves), :func:`apply_event`."""
+    """Phase LOCATE: shrink the bracket with the solve at ``dm``; once it is ``event_tol`` wide,
+    or Newton from its crossed end is converged (:func:`_converged`), or after ``bisect_iters``
+    solves: :func:`apply_event`."""
     b = st.bracket
     e = sol.e - b.floor
     hit = jnp.any(e < 0)
@@ -368,7 +369,7 @@ def apply_event(model: Model, st: State) -> State:
     op, m, E = model.op, model.op.m, model.cfg.max_events
     b = st.bracket
     flag = b.e_hi < 0
-    est = jnp.where(flag & (b.de_hi < 0), b.hi - b.e_hi / jnp.where(b.de_hi < 0, b.de_hi, -1.0), b.hi)
+    est = jnp.where(flag & (b.de_hi < 0), _newton_from_hi(b), b.hi)
     d_star = jnp.clip(jnp.min(jnp.where(flag, est, jnp.inf)), b.lo, b.hi)
     t = d_star - b.hi
     th = b.th + t * b.dth
