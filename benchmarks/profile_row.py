@@ -25,7 +25,7 @@ stick/slip, 15 mm). Three parts:
 
 Writes ``results/profile.csv`` (one row per measured item) and prints markdown tables.
 
-    .venv/bin/python benchmarks/profile_row.py          # ~3 min on 2 cores
+    .venv/bin/python benchmarks/profile_row.py          # ~1 min on 2 cores
 """
 from __future__ import annotations
 
