@@ -252,7 +252,7 @@ def _bordered_times(model: Model, sl: Slots, v: _View, z):
     """M z for the bordered matrix M of eq. (4) over the slots (identity blocks at empty slots)."""
     S = v.idx.shape[0]
     f, g = z[: 2 * S], z[2 * S:]
-    dofs = (2 * v.idx[:, None] + jnp.arange(2)).reshape(-1)
+    dofs = slot_dofs(v.idx)
     on = jnp.repeat(v.active, 2)
     B = jnp.where(on[:, None], model.op.N[dofs], 0.0)
     return jnp.concatenate([jnp.where(on, sl.Gc[dofs] @ f + B @ g, f), B.T @ f])

@@ -214,7 +214,6 @@ def step(model: Model, st: State) -> State:
 def reconcile(model: Model, st: State) -> State:
     """Bring the contact slots to the contact set of the per-node modes (the one place where
     slots change: stages change modes; the slots follow, one bordering update per node)."""
-    m = model.op.m
     was = st.slots.slot < model.cfg.capacity
     slots, over = contacts.update(model.op, st.slots, was, st.nodes.mode > FREE)
     fault = jnp.where(over & (st.fault == RUNNING), Status.OVERFLOW, st.fault).astype(jnp.int32)
@@ -366,7 +365,7 @@ def apply_event(model: Model, st: State) -> State:
     bring the state to d* (slip angles extrapolated from hi with their rate), apply every event
     flagged at hi, log the events and go to CHECK at d* (:func:`reconcile` then updates the
     contact slots)."""
-    op, m, E = model.op, model.op.m, model.cfg.max_events
+    op, E = model.op, model.cfg.max_events
     b = st.bracket
     flag = b.e_hi < 0
     est = jnp.where(flag & (b.de_hi < 0), _newton_from_hi(b), b.hi)
