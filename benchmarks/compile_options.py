@@ -8,7 +8,7 @@ lowers ``api._run``, compiles it, then times the compiled squeeze (best of ``--r
 * ``library``: the top-level program an eager ``jsq.squeeze`` compiles
   (``jaxsqueeze.compiler.options()``);
 * ``XLA_FLAGS=...``: the plain program under one process-wide XLA flag each;
-* ``capacity 32`` (``Settings.capacity``, default 64) and ``full Newton only`` (every sliding
+* ``capacity 32`` (``Settings.capacity``; 64 is a traced squeeze's default) and ``full Newton only`` (every sliding
   node solved in the S × S system instead of the compact 16 × 16 one): what the program's
   shape costs.
 

@@ -59,7 +59,7 @@ optional is required; unknown keys, at any level, are errors)::
     event_tol = 3e-8               # event bracket width [m] (default step * 1e-4)
     newton_tol = 1e-11             # slip-angle Newton tolerance [rad]
     gap_tol = 1e-10                # penetration tolerance for event A [m]
-    capacity = 64                  # contact slots
+    capacity = 64                  # contact slots (default: chosen, grown on overflow)
     max_steps = 400                # loop iteration bound
     max_events = 256               # event log size
     newton_iters = 30
@@ -436,7 +436,7 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
                     warnings.extend(uwarn)
                 if settings_ok and not _bad(method):
                     s0 = Settings(**settings)
-                    for msg in validate.check_costs(int(m_est), int(n_tri / 2 + m_est), method, s0.capacity,
+                    for msg in validate.check_costs(int(m_est), int(n_tri / 2 + m_est), method, s0.slots(int(m_est)),
                                                     s0.max_steps, s0.max_events, dtype):
                         errs.add(SceneFileError(_cost_key(msg), msg + " (estimated before meshing)"))
             if not errs.errors:

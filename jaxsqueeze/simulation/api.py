@@ -26,10 +26,13 @@ from .status import Status
 
 
 # ----------------------------------------------------------------------------- scene → core inputs
-def config_of(scene: Scene, history: bool = True) -> Config:
+def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config:
+    """The static configuration of a scene; its contact slots are ``Settings.slots`` (the
+    automatic capacity of an ``eager`` squeeze starts smaller and grows, :func:`squeeze`)."""
     s = scene.settings
     return Config(friction_model=scene.friction_model, contact=scene.contact,
-                  rotation=scene.fingers.rotation is not None, capacity=int(s.capacity),
+                  rotation=scene.fingers.rotation is not None,
+                  capacity=s.slots(len(scene.boundary_nodes()), eager),
                   max_steps=int(s.max_steps), max_events=int(s.max_events),
                   newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
                   placement=scene.placement is not None, adversary=scene.adversary is not None,
@@ -143,6 +146,14 @@ def batched_simulate(cfg: Config):
     return run
 
 
+#: the capacity an automatic squeeze grew to, by object size and configuration (without capacity)
+_GROWN: dict = {}
+
+
+def _grow_key(op: Compliance, cfg: Config):
+    return op.m, op.G.shape, dataclasses.replace(cfg, capacity=0)
+
+
 @compiler.jit(static_argnames=("cfg",))
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
@@ -167,7 +178,9 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
             squeeze and the last row), what qualities need: a batch of grasps then carries a
             few kilobytes per grasp instead of the whole history.
 
-    Runs one compiled ``lax.while_loop``; a second call with new numbers (grip, friction,
+    Runs one compiled ``lax.while_loop``. With ``Settings.capacity = None`` an eager squeeze
+    starts with few contact slots and, if they run out, squeezes again with twice as many
+    (:class:`Settings`). A second call with new numbers (grip, friction,
     depth, radius, material, tolerances) reuses the compiled program. Works under ``jax.jit``,
     ``jax.vmap`` and forward-mode differentiation (``jax.jvp``/``jax.jacfwd``) over every
     number of the scene (E, ν, thickness, μ, radius, depth, rotation coefficients).
@@ -182,11 +195,24 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     op = scene.operator() if op is None else op
     if concrete and scene.placement is None:
         check_grip(scene, op)
-    cfg = config_of(scene, history)
+    cfg = config_of(scene, history, eager=concrete)
     grasp = grasp_of(scene, op, validated=concrete)
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
+    grow = concrete and scene.settings.capacity is None
+    if grow:
+        cfg = dataclasses.replace(cfg, capacity=_GROWN.get(_grow_key(op, cfg), cfg.capacity))
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
+    while grow and int(res.status) == Status.OVERFLOW and cfg.capacity < op.m:
+        # the automatic capacity ran out: twice the slots (a new program), remembered for the
+        # next squeeze of this object in this process, while its memory stays within the limit
+        more = min(2 * cfg.capacity, op.m)
+        if validate.scene_cost_problems(dataclasses.replace(
+                scene, settings=dataclasses.replace(scene.settings, capacity=more))):
+            break
+        cfg = dataclasses.replace(cfg, capacity=more)
+        _GROWN[_grow_key(op, cfg)] = cfg.capacity
+        res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     if op.field is not None:
         res = dataclasses.replace(res, displacement=field_displacement(op, F_hat, g_hat) * op.length)
     if trim and np.ndim(res.count) == 0 and is_concrete(res):   # eager, unbatched

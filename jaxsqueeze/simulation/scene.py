@@ -116,6 +116,12 @@ class Adversary:
                 raise ValueError(f"Adversary.{name}={v!r} must be a finite length > 0 m.")
 
 
+#: contact slots an eager squeeze starts with under ``Settings.capacity = None`` (doubled on overflow)
+EAGER_SLOTS = 32
+#: contact slots of a traced squeeze under ``Settings.capacity = None`` (it cannot rerun)
+TRACED_SLOTS = 64
+
+
 @jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class Settings:
@@ -129,6 +135,11 @@ class Settings:
     gap_tol: penetration [m] a free node may reach before event A fires; default
         ``1e-9 * L`` (float64) or ``1e-5 * L`` (float32), with L the object length.
     capacity: number of contact slots (static). Contact nodes beyond it give ``Status.OVERFLOW``.
+        ``None`` (default) chooses: an eager :func:`~jaxsqueeze.squeeze` starts with 32 slots
+        (at most the boundary node count) and, when they run out, doubles them and squeezes
+        again (a program per capacity, the same result); a traced squeeze (``jit``, ``vmap``,
+        ``jacfwd``, the planner) cannot rerun and keeps 64. Fewer slots are faster: the
+        bordered inverse is (2·capacity + 3)².
     max_steps: bound on loop iterations (steps plus event resolutions), static.
     max_events: capacity of the event log, static.
     newton_iters: Newton iteration bound, static.
@@ -142,11 +153,19 @@ class Settings:
     event_tol: float | None = None
     newton_tol: float | None = None
     gap_tol: float | None = None
-    capacity: int = field(default=64, metadata=dict(static=True))
+    capacity: int | None = field(default=None, metadata=dict(static=True))
     max_steps: int = field(default=400, metadata=dict(static=True))
     max_events: int = field(default=256, metadata=dict(static=True))
     newton_iters: int = field(default=30, metadata=dict(static=True))
     bisect_iters: int = field(default=40, metadata=dict(static=True))
+
+    def slots(self, m: int, eager: bool = False) -> int:
+        """The contact slots a squeeze of an object with m boundary nodes starts with:
+        ``capacity``, or under ``None`` min(``EAGER_SLOTS``, m) eagerly and ``TRACED_SLOTS``
+        traced."""
+        if self.capacity is not None:
+            return int(self.capacity)
+        return max(2, min(EAGER_SLOTS, int(m))) if eager else TRACED_SLOTS
 
 
 @jax.tree_util.register_dataclass
@@ -225,9 +244,11 @@ class Scene:
         s = self.settings
         for name in ("capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
             v = getattr(s, name)
+            if name == "capacity" and v is None:
+                continue
             if not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"Settings.{name}={v!r} must be a positive integer.")
-        if s.capacity < 2:
+        if s.capacity is not None and s.capacity < 2:
             raise ValueError("Settings.capacity must be at least 2 (one contact per finger).")
         for name in ("step", "event_tol", "newton_tol", "gap_tol"):
             v = getattr(s, name)

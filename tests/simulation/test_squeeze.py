@@ -235,6 +235,35 @@ def test_a_second_eager_squeeze_compiles_nothing(slanted):
     assert compiled == []
 
 
+def test_automatic_capacity_grows_on_overflow_to_the_same_result(slanted, monkeypatch):
+    """Settings.capacity = None: an eager squeeze starts with EAGER_SLOTS slots and, when its
+    contact set outgrows them, squeezes again with twice as many; the result is the one of a
+    fixed capacity, the grown capacity is remembered (the next squeeze compiles nothing), and a
+    traced squeeze keeps TRACED_SLOTS. This squeeze reaches 6 contacts: 4 slots overflow."""
+    from jaxsqueeze.simulation import scene as scene_mod
+    assert slanted.settings.capacity is None
+    assert grasp_mod.config_of(slanted, eager=True).capacity == scene_mod.EAGER_SLOTS == 32
+    monkeypatch.setattr(scene_mod, "EAGER_SLOTS", 4)
+    monkeypatch.setattr(grasp_mod, "_GROWN", {})
+    assert grasp_mod.config_of(slanted, eager=True).capacity == 4
+    assert grasp_mod.config_of(slanted).capacity == scene_mod.TRACED_SLOTS
+    res = jsq.squeeze(slanted)
+    assert res.outcome == jsq.Status.SUCCESS and np.max(np.sum(res.modes > 0, axis=1)) > 4
+    assert list(grasp_mod._GROWN.values()) == [8]
+    fixed = jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=8)))
+    np.testing.assert_array_equal(res.modes, fixed.modes)
+    np.testing.assert_array_equal(res.forces, fixed.forces)
+    assert jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=4))).outcome == jsq.Status.OVERFLOW
+    compiled = []
+    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        again = jsq.squeeze(slanted.replace(friction=0.25))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert again.outcome == jsq.Status.SUCCESS and compiled == []
+
+
 def _primitives(scene):
     """Counter of the primitives in the compiled squeeze's program (all nested jaxprs)."""
     import collections
