@@ -145,8 +145,10 @@ TARGETS = {   # issue 11, "where it should be"
 _WORKER_CACHE: dict = {}
 
 
-def scene_inputs():
-    """(scene, op without field map, grasp, config, grip positions for candidates) of the foam square."""
+def scene_inputs(eager: bool = False):
+    """(scene, op without field map, grasp, config, grip positions for candidates) of the foam
+    square; the config's contact slots are an ``eager`` ``jsq.squeeze``'s (32) or a traced one's
+    (64, what ``vmap`` runs)."""
     import dataclasses
 
     from jaxsqueeze.simulation import api as G
@@ -156,7 +158,7 @@ def scene_inputs():
     op0 = dataclasses.replace(op, field=None)
     pos = np.full(int(np.max(np.asarray(op.nodes))) + 1, -1)
     pos[np.asarray(op.nodes)] = np.arange(op.m)
-    return sc, op0, G.grasp_of(sc, op), G.config_of(sc), pos
+    return sc, op0, G.grasp_of(sc, op), G.config_of(sc, eager=eager), pos
 
 
 def grips(mesh, B):
@@ -210,7 +212,7 @@ def worker(argv):
             compile_cache.enable(argv[1])
         t0 = time.perf_counter()
         from jaxsqueeze.simulation import api as G
-        sc, op0, gr, cfg, pos = scene_inputs()
+        sc, op0, gr, cfg, pos = scene_inputs(eager=True)
         t1 = time.perf_counter()
         # an eager jsq.squeeze compiles _run as a top-level program with compiler.options();
         # "plain" is the same program without them (what a squeeze inside a user's jit compiles)
@@ -301,9 +303,10 @@ def main(argv=None):
         print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in r.items()}, flush=True)
         return r
 
-    sc, op0, gr, cfg, pos = scene_inputs()
+    sc, op0, gr, cfg, pos = scene_inputs(eager=True)
+    cfg_traced = scene_inputs()[3]
     rec("scene", "foam square", nodes=sc.mesh.n, m=sc.mesh.m, friction_model=cfg.friction_model,
-        capacity=cfg.capacity, threads=cpu_count())
+        capacity=cfg.capacity, capacity_traced=cfg_traced.capacity, threads=cpu_count())
 
     # ---- one squeeze after compilation
     t = time.perf_counter()
@@ -320,6 +323,11 @@ def main(argv=None):
     def core_1blas():
         with threadpool_limits(1, "blas"):     # jaxlib's CPU LAPACK calls run in scipy's OpenBLAS
             return jax.block_until_ready(core(op0, gr))
+    core64 = G._run.lower(op0, gr, cfg_traced).compile()
+    jax.block_until_ready(core64(op0, gr))
+    t64, _ = best_of(lambda: jax.block_until_ready(core64(op0, gr)), a.reps)
+    rec("squeeze", f"core with the traced default of {cfg_traced.capacity} slots (what vmap runs)", seconds=t64,
+        rows=n_rows, per_row_ms=1e3 * t64 / n_rows)
     t_1b, _ = best_of(core_1blas, a.reps)
     rec("squeeze", "core with OpenBLAS limited to 1 thread (threadpoolctl)", seconds=t_1b, rows=n_rows,
         per_row_ms=1e3 * t_1b / n_rows, note="the squeeze's LAPACK calls are tiny; BLAS threads only wait")
