@@ -361,18 +361,23 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             return (c[1] < cfg.newton_iters) & (c[2] > tol)
 
         def body(c):
-            x, it, _ = c
+            x, it, last = c
             R, J = system(x, *consts)
-            dx = linalg.solve(J, R)
-            return x - dx, it + 1, jnp.max(jnp.abs(dx))
+            step = linalg.solve(J, R)
+            dx = jnp.max(jnp.abs(step))
+            # the loop ends once the next update is predicted below tol (this one times its
+            # ratio to the one before, an over-estimate while Newton converges quadratically):
+            # the implicit-function step below is then that next update
+            return x - step, it + 1, jnp.where((it > 0) & (dx * dx <= tol * last), 0.0, dx)
 
         start = jnp.where(jnp.any(mask), jnp.array(jnp.inf, zero.dtype), zero)
         with jax.named_scope("newton"):
-            x_c, it, last = lax.while_loop(cond, body, (take(consts[2].theta0), jnp.array(0, jnp.int32), start))
+            x_c, it, _ = lax.while_loop(cond, body, (take(consts[2].theta0), jnp.array(0, jnp.int32), start))
         # the implicit-function step (see the docstring), then dθ/dε at the solution: its
         # Jacobian has the value at x_c but the tangent of x, so d(dθ/dε)/dε is exact too
         R, J = system(x_c, *args)
         x = x_c - linalg.solve(J, R)
+        last = jnp.max(jnp.abs(lax.stop_gradient(x - x_c)))
         rate = jnp.zeros_like(v.theta0)
         if cfg.slip_events:
             _, J_t = system(_value_and_tangent(x_c, x), *args)
