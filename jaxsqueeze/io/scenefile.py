@@ -60,6 +60,7 @@ optional is required; unknown keys, at any level, are errors)::
     newton_tol = 1e-11             # slip-angle Newton tolerance [rad]
     gap_tol = 1e-10                # penetration tolerance for event A [m]
     capacity = 64                  # contact slots (default: chosen, grown on overflow)
+    sliding_capacity = 16          # sliding contacts in the Newton system (default: chosen, grown)
     max_steps = 400                # loop iteration bound
     max_events = 256               # event log size
     newton_iters = 30
@@ -110,7 +111,7 @@ TABLES = {
     "grip": {"nodes": False, "points": False},
     "squeeze": {"depth": False, "relative_depth": False, "friction": False, "friction_model": False, "contact": False, "method": False},
     "accuracy": {"step": False, "event_tol": False, "newton_tol": False, "gap_tol": False, "capacity": False,
-                 "max_steps": False, "max_events": False, "newton_iters": False, "bisect_iters": False,
+                 "sliding_capacity": False, "max_steps": False, "max_events": False, "newton_iters": False, "bisect_iters": False,
                  "precision": False},
     "plan": {"quality": False, "spacing": False, "starts": False, "steps": False, "optimizer": False,
              "learning_rate": False, "push": False, "push_at": False, "push_angle": False},
@@ -363,11 +364,13 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     for k in ("step", "event_tol", "newton_tol", "gap_tol"):
         if k in acc:
             settings[k] = errs.run(_number, f"accuracy.{k}", acc[k], positive=True)
-    for k in ("capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
+    for k in ("capacity", "sliding_capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
         if k in acc:
             settings[k] = errs.run(_number, f"accuracy.{k}", acc[k], integer=True)
     if not _bad(settings.get("capacity")) and settings.get("capacity", 2) < 2:
         errs.add(SceneFileError("accuracy.capacity", "expected at least 2 (one contact per finger)"))
+    if not _bad(settings.get("sliding_capacity")) and settings.get("sliding_capacity", 1) < 1:
+        errs.add(SceneFileError("accuracy.sliding_capacity", "expected at least 1"))
     settings_ok = not _bad(*settings.values())
     dtype = np.float32 if precision == "float32" else np.float64
 

@@ -30,9 +30,12 @@ def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config
     """The static configuration of a scene; its contact slots are ``Settings.slots`` (the
     automatic capacity of an ``eager`` squeeze starts smaller and grows, :func:`squeeze`)."""
     s = scene.settings
+    capacity = s.slots(len(scene.boundary_nodes()), eager)
+    # every frictionless contact slides: without a sliding capacity it keeps both systems
+    auto_all = scene.friction_model == "frictionless" and s.sliding_capacity is None
+    sliding = 0 if scene.friction_model == "stick" or auto_all else s.sliding(capacity, eager)
     return Config(friction_model=scene.friction_model, contact=scene.contact,
-                  rotation=scene.fingers.rotation is not None,
-                  capacity=s.slots(len(scene.boundary_nodes()), eager),
+                  rotation=scene.fingers.rotation is not None, capacity=capacity, sliding=sliding,
                   max_steps=int(s.max_steps), max_events=int(s.max_events),
                   newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
                   placement=scene.placement is not None, adversary=scene.adversary is not None,
@@ -146,12 +149,40 @@ def batched_simulate(cfg: Config):
     return run
 
 
-#: the capacity an automatic squeeze grew to, by object size and configuration (without capacity)
+#: the configuration an eager squeeze grew to, by object size, capacity settings and the rest of its configuration
 _GROWN: dict = {}
 
 
-def _grow_key(op: Compliance, cfg: Config):
-    return op.m, op.G.shape, dataclasses.replace(cfg, capacity=0)
+def _grow_key(scene: Scene, op: Compliance, cfg: Config):
+    s = scene.settings
+    return op.m, op.G.shape, s.capacity, s.sliding_capacity, dataclasses.replace(cfg, capacity=0, sliding=0)
+
+
+def _grown(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Config | None:
+    """``cfg`` with the automatic capacities that ran out grown to at least twice their size
+    and to what the last row of ``res`` needed (contact slots up to the boundary node count
+    and the memory limit, sliding slots up to the contact slots), or None when they are fixed
+    by the settings or cannot grow. The capacity that ran out is the one the last row fills
+    (that row may already miss the node that found no slot); both when it fills neither."""
+    s = scene.settings
+    mode = np.asarray(res.modes)[int(res.count) - 1]
+    contacts, sliding = int(np.sum(mode > laws.FREE)), int(np.sum(mode >= laws.SLIP_POS))
+    pow2 = lambda k: 1 << max(int(k) - 1, 1).bit_length()  # noqa: E731
+    full_c = contacts >= cfg.capacity
+    full_s = 0 < cfg.sliding <= sliding
+    if not (full_c or full_s):
+        full_c = full_s = True
+    capacity = cfg.capacity
+    if s.capacity is None and full_c:
+        more = min(max(2 * capacity, pow2(contacts)), op.m)
+        if not validate.scene_cost_problems(scene.replace(settings=dataclasses.replace(s, capacity=more))):
+            capacity = more
+    slide = cfg.sliding
+    if s.sliding_capacity is None and 0 < slide < capacity and full_s:
+        slide = min(max(2 * slide, pow2(sliding)), capacity)
+    if (capacity, slide) == (cfg.capacity, cfg.sliding):
+        return None
+    return dataclasses.replace(cfg, capacity=capacity, sliding=slide)
 
 
 @compiler.jit(static_argnames=("cfg",))
@@ -178,9 +209,9 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
             squeeze and the last row), what qualities need: a batch of grasps then carries a
             few kilobytes per grasp instead of the whole history.
 
-    Runs one compiled ``lax.while_loop``. With ``Settings.capacity = None`` an eager squeeze
-    starts with few contact slots and, if they run out, squeezes again with twice as many
-    (:class:`Settings`). A second call with new numbers (grip, friction,
+    Runs one compiled ``lax.while_loop``. With ``Settings.capacity`` and ``sliding_capacity``
+    at ``None`` an eager squeeze starts with few contact and sliding slots and, if they run
+    out, squeezes again with twice as many (:class:`Settings`). A second call with new numbers (grip, friction,
     depth, radius, material, tolerances) reuses the compiled program. Works under ``jax.jit``,
     ``jax.vmap`` and forward-mode differentiation (``jax.jvp``/``jax.jacfwd``) over every
     number of the scene (E, ν, thickness, μ, radius, depth, rotation coefficients).
@@ -199,19 +230,17 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     grasp = grasp_of(scene, op, validated=concrete)
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
-    grow = concrete and scene.settings.capacity is None
-    if grow:
-        cfg = dataclasses.replace(cfg, capacity=_GROWN.get(_grow_key(op, cfg), cfg.capacity))
+    if concrete:
+        cfg = _GROWN.get(_grow_key(scene, op, cfg), cfg)
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
-    while grow and int(res.status) == Status.OVERFLOW and cfg.capacity < op.m:
-        # the automatic capacity ran out: twice the slots (a new program), remembered for the
-        # next squeeze of this object in this process, while its memory stays within the limit
-        more = min(2 * cfg.capacity, op.m)
-        if validate.scene_cost_problems(dataclasses.replace(
-                scene, settings=dataclasses.replace(scene.settings, capacity=more))):
+    while concrete and int(res.status) == Status.OVERFLOW:
+        # an automatic capacity ran out: twice the slots (a new program), remembered for the
+        # next squeeze of this object in this process
+        bigger = _grown(scene, op, cfg, res)
+        if bigger is None:
             break
-        cfg = dataclasses.replace(cfg, capacity=more)
-        _GROWN[_grow_key(op, cfg)] = cfg.capacity
+        _GROWN[_grow_key(scene, op, cfg)] = bigger
+        cfg = bigger
         res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     if op.field is not None:
         res = dataclasses.replace(res, displacement=field_displacement(op, F_hat, g_hat) * op.length)

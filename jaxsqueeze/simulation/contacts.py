@@ -289,8 +289,10 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
     re-anchored there, so a node that joins feels no force from it),
     ε = ``NEUTRAL_REG`` × the mean contact stiffness (``docs/numerics.md`` §5.1).
 
-    The unknowns are only the sliding slots: gathered into ``COMPACT`` positions when they fit
-    (a 16 × 16 system instead of S × S), all S slots otherwise.
+    The unknowns are only the sliding slots: gathered into ``Config.sliding`` positions (one
+    system; more sliding slots stop the squeeze with an overflow), or with ``sliding = 0`` into
+    ``COMPACT`` positions when they fit (a 16 × 16 system instead of S × S), all S slots
+    otherwise (two systems in the program).
     """
     S = v.idx.shape[0]
     cfg = model.cfg
@@ -395,11 +397,16 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
     still = lambda: (v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0),  # noqa: E731
                      jnp.zeros(2, zero.dtype))
     full = lambda: solve_for(jnp.arange(S), sliding, jnp.arange(S), sliding)  # noqa: E731
-    if S <= COMPACT:
+
+    def compact(Q):
+        return lambda: solve_for(jnp.nonzero(sliding, size=Q, fill_value=S)[0], jnp.arange(Q) < n,
+                                 jnp.clip(jnp.cumsum(sliding) - 1, 0, Q - 1), sliding)
+
+    if 0 < cfg.sliding < S:     # one system; more sliding slots are an overflow (engine.reconcile)
+        return lax.cond(n > 0, compact(cfg.sliding), still)
+    if cfg.sliding or S <= COMPACT:
         return lax.cond(n > 0, full, still)
-    compact = lambda: solve_for(jnp.nonzero(sliding, size=COMPACT, fill_value=S)[0], jnp.arange(COMPACT) < n,  # noqa: E731
-                                jnp.clip(jnp.cumsum(sliding) - 1, 0, COMPACT - 1), sliding)
-    return lax.switch(jnp.where(n == 0, 0, jnp.where(n <= COMPACT, 1, 2)), [still, compact, full])
+    return lax.switch(jnp.where(n == 0, 0, jnp.where(n <= COMPACT, 1, 2)), [still, compact(COMPACT), full])
 
 
 @jax.custom_jvp

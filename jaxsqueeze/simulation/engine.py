@@ -214,8 +214,11 @@ def step(model: Model, st: State) -> State:
 def reconcile(model: Model, st: State) -> State:
     """Bring the contact slots to the contact set of the per-node modes (the one place where
     slots change: stages change modes; the slots follow, one bordering update per node)."""
-    was = st.slots.slot < model.cfg.capacity
+    cfg = model.cfg
+    was = st.slots.slot < cfg.capacity
     slots, over = contacts.update(model.op, st.slots, was, st.nodes.mode > FREE)
+    if 0 < cfg.sliding < cfg.capacity and cfg.newton:     # more sliding nodes than Newton slots
+        over = over | (jnp.sum(st.nodes.mode >= SLIP_POS) > cfg.sliding)
     fault = jnp.where(over & (st.fault == RUNNING), Status.OVERFLOW, st.fault).astype(jnp.int32)
     return _with(st, slots=slots, fault=fault)
 

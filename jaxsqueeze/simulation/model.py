@@ -25,6 +25,7 @@ class Config:
     contact: str = "segment"          # "segment" | "point"
     rotation: bool = False
     capacity: int = 64
+    sliding: int = 0                  # one Newton system of this many sliding slots; 0: COMPACT + all slots
     max_steps: int = 400
     max_events: int = 256
     newton_iters: int = 30

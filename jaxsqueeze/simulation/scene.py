@@ -120,6 +120,9 @@ class Adversary:
 EAGER_SLOTS = 32
 #: contact slots of a traced squeeze under ``Settings.capacity = None`` (it cannot rerun)
 TRACED_SLOTS = 64
+#: sliding contacts an eager Coulomb squeeze solves for under ``Settings.sliding_capacity = None``
+#: (doubled on overflow)
+EAGER_SLIDING = 8
 
 
 @jax.tree_util.register_dataclass
@@ -140,6 +143,12 @@ class Settings:
         again (a program per capacity, the same result); a traced squeeze (``jit``, ``vmap``,
         ``jacfwd``, the planner) cannot rerun and keeps 64. Fewer slots are faster: the
         bordered inverse is (2·capacity + 3)².
+    sliding_capacity: sliding contacts in the slip-angle Newton system (static, Coulomb; at
+        most ``capacity``). More sliding nodes give ``Status.OVERFLOW``. ``None`` (default):
+        an eager squeeze starts with 8 and doubles them like ``capacity``; a traced one
+        solves up to 16 in a compact system and falls back to one over all slots (both
+        compiled). One system is a smaller program (compiles faster) and a smaller one runs
+        faster.
     max_steps: bound on loop iterations (steps plus event resolutions), static.
     max_events: capacity of the event log, static.
     newton_iters: Newton iteration bound, static.
@@ -154,6 +163,7 @@ class Settings:
     newton_tol: float | None = None
     gap_tol: float | None = None
     capacity: int | None = field(default=None, metadata=dict(static=True))
+    sliding_capacity: int | None = field(default=None, metadata=dict(static=True))
     max_steps: int = field(default=400, metadata=dict(static=True))
     max_events: int = field(default=256, metadata=dict(static=True))
     newton_iters: int = field(default=30, metadata=dict(static=True))
@@ -166,6 +176,14 @@ class Settings:
         if self.capacity is not None:
             return int(self.capacity)
         return max(2, min(EAGER_SLOTS, int(m))) if eager else TRACED_SLOTS
+
+    def sliding(self, capacity: int, eager: bool = False) -> int:
+        """The size of the one compact Newton system a squeeze with ``capacity`` slots starts
+        with: ``sliding_capacity``, or under ``None`` min(``EAGER_SLIDING``, capacity) eagerly
+        and 0 traced (0: a compact system of ``contacts.COMPACT`` with all slots as fallback)."""
+        if self.sliding_capacity is not None:
+            return min(int(self.sliding_capacity), int(capacity))
+        return min(EAGER_SLIDING, int(capacity)) if eager else 0
 
 
 @jax.tree_util.register_dataclass
@@ -242,9 +260,9 @@ class Scene:
                     raise ValueError(f"grip node(s) {bad} are not on the boundary; pick nodes from "
                                      "mesh.boundary (or use Scene.nearest_boundary_node).")
         s = self.settings
-        for name in ("capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
+        for name in ("capacity", "sliding_capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
             v = getattr(s, name)
-            if name == "capacity" and v is None:
+            if name in ("capacity", "sliding_capacity") and v is None:
                 continue
             if not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"Settings.{name}={v!r} must be a positive integer.")

@@ -11,7 +11,7 @@ class Status(enum.IntEnum):
     SLIP_FAILURE = 1     #: every contact on one finger slides
     MAX_STEPS = 2        #: step bound reached before the target depth
     NEWTON_FAILURE = 3   #: slip-angle Newton solve did not converge
-    OVERFLOW = 4         #: more contact nodes than slots (raise ``capacity``)
+    OVERFLOW = 4         #: more contact (or sliding) nodes than slots (raise ``capacity`` / ``sliding_capacity``)
     NONFINITE = 5        #: a NaN or inf appeared in the state
     EVENT_OVERFLOW = 6   #: the event log is full (raise ``max_events``)
     INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone
@@ -36,7 +36,7 @@ _ADVICE = {
                            "result.invalid names it. Fix that field of the scene or its settings."),
     Status.MAX_STEPS: "Step bound reached. Raise Settings.max_steps or the step size.",
     Status.NEWTON_FAILURE: "Slip-angle Newton did not converge. Lower Settings.step or raise Settings.newton_iters.",
-    Status.OVERFLOW: "More contact nodes than slots. Raise Settings.capacity.",
+    Status.OVERFLOW: "More contact nodes than slots, or more sliding nodes than Newton slots. Raise Settings.capacity or Settings.sliding_capacity (or leave both at None: an eager squeeze then grows them).",
     Status.NONFINITE: "A non-finite value appeared. Check the scene's scale and material values.",
     Status.EVENT_OVERFLOW: "The event log is full. Raise Settings.max_events.",
     Status.STALLED: ("No consistent contact set exists at this depth: a node touched a fingertip but as a contact "

@@ -161,6 +161,16 @@ def test_demo_scene_is_packaged(capsys):
     assert "[material]" in text and "foam" in text
 
 
+def test_scene_file_capacities_reach_the_settings():
+    """[accuracy] capacity and sliding_capacity set Settings; left out, both are None (chosen
+    and grown by an eager squeeze)."""
+    base = SCENE.replace("refine_edge = 0.003\nrefine_radius = 0.012\n", "")
+    s = scenefile.load_text(base.replace("capacity = 64", "capacity = 40\nsliding_capacity = 12")).scene.settings
+    assert (s.capacity, s.sliding_capacity) == (40, 12)
+    s = scenefile.load_text(base.replace("capacity = 64\n", "")).scene.settings
+    assert (s.capacity, s.sliding_capacity) == (None, None)
+
+
 def test_example_scene_reads_mesh_file():
     spec = scenefile.load(os.path.join(ROOT, "examples", "foam_disk.toml"))
     mesh = spec.scene.mesh
@@ -212,6 +222,7 @@ BAD = {
     "bad precision": ("accuracy.precision", lambda s: s.replace('"float64"', '"float16"')),
     "zero capacity": ("accuracy.capacity", lambda s: s.replace("capacity = 64", "capacity = 0")),
     "float capacity": ("accuracy.capacity", lambda s: s.replace("capacity = 64", "capacity = 6.4")),
+    "zero sliding capacity": ("accuracy.sliding_capacity", lambda s: s.replace("capacity = 64", "capacity = 64\nsliding_capacity = 0")),
     "bad friction model": ("squeeze.friction_model", lambda s: s.replace("friction = 0.3", 'friction = 0.3\nfriction_model = "viscous"')),
     "not toml": ("file", lambda s: s.replace("[material]", "[material")),
     "mesh file missing": ("object.mesh_file", lambda s: s.replace(

@@ -235,25 +235,33 @@ def test_a_second_eager_squeeze_compiles_nothing(slanted):
     assert compiled == []
 
 
-def test_automatic_capacity_grows_on_overflow_to_the_same_result(slanted, monkeypatch):
-    """Settings.capacity = None: an eager squeeze starts with EAGER_SLOTS slots and, when its
-    contact set outgrows them, squeezes again with twice as many; the result is the one of a
-    fixed capacity, the grown capacity is remembered (the next squeeze compiles nothing), and a
-    traced squeeze keeps TRACED_SLOTS. This squeeze reaches 6 contacts: 4 slots overflow."""
+def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monkeypatch):
+    """Settings.capacity and sliding_capacity = None: an eager squeeze starts with EAGER_SLOTS
+    contact slots and EAGER_SLIDING Newton slots and, when its contact set outgrows them,
+    squeezes again with more; the result is the one of those capacities fixed, the grown
+    capacities are remembered (the next squeeze compiles nothing), and a traced squeeze keeps
+    TRACED_SLOTS with both Newton systems (sliding = 0). This squeeze reaches 6 contacts, 4 of
+    them sliding: 4 slots and 1 Newton slot overflow."""
     from jaxsqueeze.simulation import scene as scene_mod
-    assert slanted.settings.capacity is None
-    assert grasp_mod.config_of(slanted, eager=True).capacity == scene_mod.EAGER_SLOTS == 32
+    assert slanted.settings.capacity is None and slanted.settings.sliding_capacity is None
+    cfg = grasp_mod.config_of(slanted, eager=True)
+    assert (cfg.capacity, cfg.sliding) == (scene_mod.EAGER_SLOTS, scene_mod.EAGER_SLIDING) == (32, 8)
+    traced = grasp_mod.config_of(slanted)
+    assert (traced.capacity, traced.sliding) == (scene_mod.TRACED_SLOTS, 0)
     monkeypatch.setattr(scene_mod, "EAGER_SLOTS", 4)
+    monkeypatch.setattr(scene_mod, "EAGER_SLIDING", 1)
     monkeypatch.setattr(grasp_mod, "_GROWN", {})
-    assert grasp_mod.config_of(slanted, eager=True).capacity == 4
-    assert grasp_mod.config_of(slanted).capacity == scene_mod.TRACED_SLOTS
     res = jsq.squeeze(slanted)
-    assert res.outcome == jsq.Status.SUCCESS and np.max(np.sum(res.modes > 0, axis=1)) > 4
-    assert list(grasp_mod._GROWN.values()) == [8]
-    fixed = jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=8)))
+    assert res.outcome == jsq.Status.SUCCESS
+    assert np.max(np.sum(res.modes > 0, axis=1)) > 4 and np.max(np.sum(res.modes >= 2, axis=1)) > 1
+    (grown,) = grasp_mod._GROWN.values()
+    assert grown.capacity == 8 and grown.sliding >= 4
+    fixed = jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=8, sliding_capacity=grown.sliding)))
     np.testing.assert_array_equal(res.modes, fixed.modes)
     np.testing.assert_array_equal(res.forces, fixed.forces)
-    assert jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=4))).outcome == jsq.Status.OVERFLOW
+    for small in (jsq.Settings(capacity=4), jsq.Settings(sliding_capacity=1)):
+        over = jsq.squeeze(slanted.replace(settings=small))
+        assert over.outcome == jsq.Status.OVERFLOW and "sliding_capacity" in over.outcome.advice
     compiled = []
     listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
     jax.monitoring.register_event_duration_secs_listener(listener)
