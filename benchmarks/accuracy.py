@@ -204,6 +204,8 @@ def prepare(p: Point, tries: int = 3) -> None:
             if grow is None:
                 break
             s = p.scene.settings
+            if getattr(s, grow) is None:      # an automatic capacity that could not grow further
+                break
             print(f"  {p.knob} {p.setting}: {res.outcome.name}, {grow} -> {2 * getattr(s, grow)}", flush=True)
             p.scene = p.scene.replace(settings=dataclasses.replace(s, **{grow: 2 * getattr(s, grow)}))
     p.got = dict(status=res.outcome.name, rows=int(res.count), depth=float(res.final_depth),

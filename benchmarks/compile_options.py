@@ -4,13 +4,13 @@ The foam square of ``jaxsqueeze/scenes/foam_square.toml`` (1,265 nodes, m = 122,
 15 mm, float64). Every variant runs in a fresh process (no persistent cache), which traces and
 lowers ``api._run``, compiles it, then times the compiled squeeze (best of ``--reps``):
 
-* ``plain``: ``jax.jit`` with XLA's defaults (what a squeeze inside a user's ``jit`` compiles);
+* ``plain``: ``jax.jit`` with XLA's defaults of the program an eager squeeze runs;
 * ``library``: the top-level program an eager ``jsq.squeeze`` compiles
-  (``jaxsqueeze.compiler.options()``);
+  (``jaxsqueeze.compiler.options()``; 32 contact slots and one 8-contact Newton system);
 * ``XLA_FLAGS=...``: the plain program under one process-wide XLA flag each;
-* ``capacity 32`` (``Settings.capacity``; 64 is a traced squeeze's default) and ``full Newton only`` (every sliding
-  node solved in the S × S system instead of the compact 16 × 16 one): what the program's
-  shape costs.
+* ``traced defaults``: the program's shape a squeeze inside ``jit``/``vmap`` gets (64 slots,
+  the 16-contact Newton system and the all-slot fallback), and the same with the all-slot
+  Newton system only: what the program's shape costs.
 
 Writes ``results/compile_options.csv`` and ``results/compile_options.png``.
 
@@ -34,14 +34,12 @@ VARIANTS = [  # (label, XLA_FLAGS, worker arguments)
     ("XLA_FLAGS backend opt level 0", "--xla_backend_optimization_level=0", ["plain"]),
     ("XLA_FLAGS llvm expensive passes off", "--xla_llvm_disable_expensive_passes=true", ["plain"]),
     ("XLA_FLAGS codegen split 1", "--xla_cpu_parallel_codegen_split_count=1", ["plain"]),
-    ("library, capacity 32", "", ["library", "capacity32"]),
-    ("library, full Newton only", "", ["library", "fullonly"]),
+    ("library, traced defaults (64 slots, both Newton systems)", "", ["library", "traced"]),
+    ("library, 64 slots, the all-slot Newton system only", "", ["library", "traced", "fullonly"]),
 ]
 
 
 def worker(args, reps):
-    import dataclasses
-
     import jax
     jax.config.update("jax_enable_x64", True)
     from jaxsqueeze.simulation import api as G
@@ -49,9 +47,7 @@ def worker(args, reps):
     from throughput import scene_inputs
     if "fullonly" in args:
         contacts.COMPACT = 10 ** 6
-    sc, op0, gr, cfg, _ = scene_inputs()
-    if "capacity32" in args:
-        cfg = dataclasses.replace(cfg, capacity=32)
+    sc, op0, gr, cfg, _ = scene_inputs(eager="traced" not in args)
     fn = G._run.plain if "plain" in args else G._run
     t0 = time.perf_counter()
     low = fn.lower(op0, gr, cfg)

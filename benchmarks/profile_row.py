@@ -176,7 +176,7 @@ def setup(scene=None):
     sc = scene or foam()
     op = sc.operator()
     op0 = dataclasses.replace(op, field=None)
-    gr, cfg = G.grasp_of(sc, op), G.config_of(sc)
+    gr, cfg = G.grasp_of(sc, op), G.eager_config(sc, op)
     sim = jax.jit(lambda o, g: E.simulate(o, g, cfg))
     st = jax.block_until_ready(sim(op0, gr))
     return sc, op0, gr, cfg, st, sim

@@ -89,9 +89,10 @@ def grip_of(mesh, a=(-0.005, -0.05), b=(0.005, 0.05)):
 
 
 def core_inputs(scene):
+    """The compiled core's inputs, with the configuration an eager ``jsq.squeeze`` runs."""
     from jaxsqueeze.simulation import api as G
     op = scene.operator()
-    return dataclasses.replace(op, field=None), G.grasp_of(scene, op), G.config_of(scene)
+    return dataclasses.replace(op, field=None), G.grasp_of(scene, op), G.eager_config(scene, op)
 
 
 def time_core(scene, reps=3):

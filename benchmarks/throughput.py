@@ -158,7 +158,7 @@ def scene_inputs(eager: bool = False):
     op0 = dataclasses.replace(op, field=None)
     pos = np.full(int(np.max(np.asarray(op.nodes))) + 1, -1)
     pos[np.asarray(op.nodes)] = np.arange(op.m)
-    return sc, op0, G.grasp_of(sc, op), G.config_of(sc, eager=eager), pos
+    return sc, op0, G.grasp_of(sc, op), G.eager_config(sc, op) if eager else G.config_of(sc), pos
 
 
 def grips(mesh, B):

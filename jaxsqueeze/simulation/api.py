@@ -153,6 +153,13 @@ def batched_simulate(cfg: Config):
 _GROWN: dict = {}
 
 
+def eager_config(scene: Scene, op: Compliance, history: bool = True) -> Config:
+    """The configuration an eager :func:`squeeze` of ``scene`` starts with: its automatic
+    capacities, or what an earlier squeeze of the same object in this process grew them to."""
+    cfg = config_of(scene, history, eager=True)
+    return _GROWN.get(_grow_key(scene, op, cfg), cfg)
+
+
 def _grow_key(scene: Scene, op: Compliance, cfg: Config):
     s = scene.settings
     return op.m, op.G.shape, s.capacity, s.sliding_capacity, dataclasses.replace(cfg, capacity=0, sliding=0)
@@ -226,12 +233,10 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     op = scene.operator() if op is None else op
     if concrete and scene.placement is None:
         check_grip(scene, op)
-    cfg = config_of(scene, history, eager=concrete)
+    cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)
     grasp = grasp_of(scene, op, validated=concrete)
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
-    if concrete:
-        cfg = _GROWN.get(_grow_key(scene, op, cfg), cfg)
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     while concrete and int(res.status) == Status.OVERFLOW:
         # an automatic capacity ran out: twice the slots (a new program), remembered for the
