@@ -20,9 +20,10 @@ Knobs:
   (the zone radius stays the file's 2 x 6 mm; the loader itself refuses the 1.5 mm / 0.25 mm
   mesh on its pre-meshing size estimate). Only the grading between the two zones
   (slope 0.3, a constant of the mesher) is not scaled; the contact zone is refined exactly
-  uniformly. ``Settings.capacity`` (contact slots) and the event log grow with the expected
-  number of contact nodes (``settings_for``); a run that still overflows is repeated with
-  that capacity doubled. The order of convergence p of each error is the least-squares slope
+  uniformly. The event log and the step bound grow with the expected number of contact
+  nodes (``settings_for``); the contact and sliding slots are the library's automatic ones
+  (an eager squeeze grows them until the contact set fits; the ``capacity`` column is what
+  the timed program used, contact / sliding slots). The order of convergence p of each error is the least-squares slope
   of log(error) against log(h), h = refine_edge (the spacing of the boundary nodes in the
   contact zone; max_edge is proportional to it, so the slope is the same for either).
 * ``step``: squeeze step depth/10 ... depth/200 (default depth/50).
@@ -129,6 +130,7 @@ class Point:
     times: list = field(default_factory=list)
     build_times: list = field(default_factory=list)
     loads: list = field(default_factory=list)
+    capacity: str = ""                         # contact / sliding slots of the timed program
 
     def precision(self):
         import jax
@@ -141,13 +143,12 @@ class Point:
 
 # ----------------------------------------------------------------------------- scenes
 def settings_for(refine_edge: float):
-    """Static capacities that fit the contact set of a mesh whose contact zone has this spacing
-    (the defaults 64 / 256 / 400 down to 0.7 mm)."""
+    """An event log and a step bound that fit a mesh whose contact zone has this spacing (the
+    defaults 256 / 400 down to 0.7 mm); the contact slots are automatic (grown on overflow)."""
     import jaxsqueeze as jsq
     per_finger = CONTACT_WIDTH / refine_edge
     events = max(256, 32 * math.ceil(6 * per_finger / 32))
-    return jsq.Settings(capacity=max(64, 16 * math.ceil(2.5 * per_finger / 16)), max_events=events,
-                        max_steps=max(400, events + 150))
+    return jsq.Settings(max_events=events, max_steps=max(400, events + 150))
 
 
 def mesh_scene(base, scale: float):
@@ -208,6 +209,9 @@ def prepare(p: Point, tries: int = 3) -> None:
                 break
             print(f"  {p.knob} {p.setting}: {res.outcome.name}, {grow} -> {2 * getattr(s, grow)}", flush=True)
             p.scene = p.scene.replace(settings=dataclasses.replace(s, **{grow: 2 * getattr(s, grow)}))
+        from jaxsqueeze.simulation import api as G
+        cfg = G.eager_config(p.scene, p.scene.operator())
+        p.capacity = f"{cfg.capacity} / {cfg.sliding}"
     p.got = dict(status=res.outcome.name, rows=int(res.count), depth=float(res.final_depth),
                  force=np.asarray(res.total_force[-1, 0], float), width=contact_width(res),
                  events=[(d, n, k, f) for d, n, k, f in res.events.rows()])
@@ -255,7 +259,7 @@ def row_of(p: Point, ref: Point) -> dict:
     """The CSV row of a point, with its errors against the knob's reference."""
     nan = float("nan")
     r = dict(knob=p.knob, setting=p.setting, reference=ref.setting, nodes=p.scene.mesh.n, boundary=p.scene.mesh.m,
-             capacity=p.scene.settings.capacity, spacing_mm=1e3 * p.spacing, status=p.got["status"],
+             capacity=p.capacity, spacing_mm=1e3 * p.spacing, status=p.got["status"],
              rows=p.got["rows"], repeats=len(p.times), time_s=min(p.times, default=nan),
              build_s=min(p.build_times, default=nan), load_min=min(p.loads, default=nan),
              load_max=max(p.loads, default=nan), width_mm=1e3 * p.got["width"])

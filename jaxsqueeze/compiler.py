@@ -2,7 +2,7 @@
 
 On the CPU the squeeze is dozens of small operations per loop iteration; XLA:CPU's fusion
 emitters spend compile time on them that buys no run time. Without them the XLA compile of
-the foam-square squeeze takes 3.0 s instead of 4.8 s, and the program runs as fast and gives
+the foam-square squeeze takes 1.9 s instead of 3.4 s, and the program runs as fast and gives
 the same numbers (``benchmarks/compile_options.py``; ``benchmarks/README.md``, "Compilation
 and host work"). JAX accepts compiler options only on a
 top-level ``jax.jit`` (not inside a user's ``jit``), and an option this jaxlib does not know is

@@ -238,7 +238,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
-    while concrete and int(res.status) == Status.OVERFLOW:
+    while concrete and np.ndim(res.status) == 0 and int(res.status) == Status.OVERFLOW:
         # an automatic capacity ran out: twice the slots (a new program), remembered for the
         # next squeeze of this object in this process
         bigger = _grown(scene, op, cfg, res)
