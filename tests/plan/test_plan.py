@@ -130,6 +130,30 @@ def test_map_chunks_across_processes_equal_the_loop(ellipse, tmp_path):
     np.testing.assert_allclose(pooled.grip_force, loop.grip_force, rtol=1e-12, atol=0)
 
 
+def test_maps_squeeze_with_quick_capacities_and_redo_what_overflows(ellipse, monkeypatch):
+    """evaluate squeezes every candidate with plan.search.quick(scene) (the automatic capacities
+    fixed where an eager squeeze starts them) and again with the scene's own where that
+    overflows: the same statuses and qualities as squeezing with the scene's own throughout."""
+    from jaxsqueeze.plan import search
+    from jaxsqueeze.simulation import scene as scene_mod
+    s = search.quick(ellipse).settings
+    assert (s.capacity, s.sliding_capacity) == (32, 8)
+    P = float(ellipse.curve().perimeter)
+    X = plan.candidate_pairs(ellipse, spacing=P / 8)[:3]
+    op = ellipse.operator()
+    own = search._evaluate(ellipse, X, "squeeze_work", op, "loop", 64, False, None, True)
+    fast = plan.evaluate(ellipse, X, op=op, batch="loop", progress=False)
+    assert np.sum(own.status == jsq.Status.SUCCESS) == 2              # and one SLIP_FAILURE
+    np.testing.assert_array_equal(fast.status, own.status)
+    np.testing.assert_allclose(fast.quality, own.quality, rtol=1e-10, atol=0)
+    monkeypatch.setattr(scene_mod, "EAGER_SLOTS", 2)          # every candidate overflows 2 slots
+    assert search._evaluate(search.quick(ellipse), X, "squeeze_work", op, "loop", 64, False, None,
+                            True).status.tolist() == [jsq.Status.OVERFLOW] * 3
+    redone = plan.evaluate(ellipse, X, op=op, batch="loop", progress=False)
+    np.testing.assert_array_equal(redone.status, own.status)
+    np.testing.assert_array_equal(redone.quality, own.quality)
+
+
 PLANNING_OBJECTS = {     # coarse meshes: a fine exhaustive map at node spacing stays affordable in a test
     "square": lambda: jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01),
     "ellipse": lambda: jsq.shapes.ellipse(0.06, 0.04, max_edge=0.01),
