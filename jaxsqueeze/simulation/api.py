@@ -218,8 +218,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
 
     Runs one compiled ``lax.while_loop``. With ``Settings.capacity`` and ``sliding_capacity``
     at ``None`` an eager squeeze starts with few contact and sliding slots and, if they run
-    out, squeezes again with twice as many (:class:`Settings`). A second call with new numbers (grip, friction,
-    depth, radius, material, tolerances) reuses the compiled program. Works under ``jax.jit``,
+    out, squeezes again with more (:class:`Settings`). A second call with new numbers (grip,
+    friction, depth, radius, material, tolerances) reuses the compiled program. Works under ``jax.jit``,
     ``jax.vmap`` and forward-mode differentiation (``jax.jvp``/``jax.jacfwd``) over every
     number of the scene (E, ν, thickness, μ, radius, depth, rotation coefficients).
     Eagerly, invalid input raises ``ValueError`` naming every bad field; under tracing it
@@ -239,8 +239,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         validate.raise_if_invalid(validate_values(grasp, scene, op))
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     while concrete and np.ndim(res.status) == 0 and int(res.status) == Status.OVERFLOW:
-        # an automatic capacity ran out: twice the slots (a new program), remembered for the
-        # next squeeze of this object in this process
+        # an automatic capacity ran out: more slots (a new program), remembered for the next
+        # squeeze of this object in this process
         bigger = _grown(scene, op, cfg, res)
         if bigger is None:
             break

@@ -141,14 +141,15 @@ class Settings:
         ``None`` (default) chooses: an eager :func:`~jaxsqueeze.squeeze` starts with 32 slots
         (at most the boundary node count) and, when they run out, doubles them and squeezes
         again (a program per capacity, the same result); a traced squeeze (``jit``, ``vmap``,
-        ``jacfwd``, the planner) cannot rerun and keeps 64. Fewer slots are faster: the
-        bordered inverse is (2·capacity + 3)².
-    sliding_capacity: sliding contacts in the slip-angle Newton system (static, Coulomb; at
-        most ``capacity``). More sliding nodes give ``Status.OVERFLOW``. ``None`` (default):
-        an eager squeeze starts with 8 and doubles them like ``capacity``; a traced one
-        solves up to 16 in a compact system and falls back to one over all slots (both
-        compiled). One system is a smaller program (compiles faster) and a smaller one runs
-        faster.
+        ``jacfwd``) cannot rerun and keeps 64 (the planner squeezes with 32 and redoes what
+        overflows: ``plan.search.quick``). Fewer slots are faster: the bordered inverse is
+        (2·capacity + 3)².
+    sliding_capacity: sliding contacts in the slip-angle Newton system (static; at most
+        ``capacity``). More sliding nodes give ``Status.OVERFLOW``. ``None`` (default): an
+        eager Coulomb squeeze starts with 8 and grows them like ``capacity``; a traced one,
+        and a frictionless one, solve up to 16 in a compact system and fall back to one over
+        all slots (both compiled). One system is a smaller program (compiles faster) and a
+        smaller one runs faster.
     max_steps: bound on loop iterations (steps plus event resolutions), static.
     max_events: capacity of the event log, static.
     newton_iters: Newton iteration bound, static.
