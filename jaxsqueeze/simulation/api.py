@@ -52,31 +52,34 @@ def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:
     dt = op.G.dtype
     f64 = dt == jnp.float64
     L = op.length
+    # eager (validated) numbers stay numpy until the compiled call takes them: a device array
+    # per number would cost ~50 µs each
+    xp = np if validated else jnp
     s = scene.settings
-    depth = jnp.asarray(scene.depth, dt)
-    step = jnp.asarray(s.step, dt) if s.step is not None else depth / 50
-    event_tol = jnp.asarray(s.event_tol, dt) if s.event_tol is not None else step * 1e-4
+    depth = xp.asarray(scene.depth, dt)
+    step = xp.asarray(s.step, dt) if s.step is not None else depth / 50
+    event_tol = xp.asarray(s.event_tol, dt) if s.event_tol is not None else step * 1e-4
     newton_tol = s.newton_tol if s.newton_tol is not None else (1e-11 if f64 else 1e-5)
     gap_tol = s.gap_tol if s.gap_tol is not None else (1e-9 if f64 else 1e-5) * L
     nodes = scene.boundary_nodes()
     table = boundary.position_table(nodes, int(np.max(nodes)) + 1)
-    grip = jnp.asarray(boundary.lookup(table, scene.grip)) if scene.grip is not None else jnp.zeros(2, jnp.int32)
+    grip = xp.asarray(boundary.lookup(table, scene.grip)) if scene.grip is not None else xp.zeros(2, np.int32)
     placement = adversary = curve = ()
     if scene.placement is not None or scene.adversary is not None:
         curve = scene.curve()
     if scene.placement is not None:
-        placement = (jnp.asarray(scene.placement.s, dt), jnp.asarray(scene.placement.angle, dt))
+        placement = (xp.asarray(scene.placement.s, dt), xp.asarray(scene.placement.angle, dt))
     if scene.adversary is not None:
         a = scene.adversary
-        radius = jnp.asarray(a.radius if a.radius is not None else scene.fingers.radius, dt)
-        push = jnp.asarray(a.push, dt)
-        adversary = (jnp.asarray(a.s, dt), jnp.asarray(a.angle, dt), radius, push,
-                     jnp.asarray(a.step, dt) if a.step is not None else push / 50)
+        radius = xp.asarray(a.radius if a.radius is not None else scene.fingers.radius, dt)
+        push = xp.asarray(a.push, dt)
+        adversary = (xp.asarray(a.s, dt), xp.asarray(a.angle, dt), radius, push,
+                     xp.asarray(a.step, dt) if a.step is not None else push / 50)
     rot = scene.fingers.rotation
-    rot = jnp.zeros((2, 1), dt) if rot is None else jnp.asarray(rot, dt)
-    g = Grasp(grip=grip, radius=jnp.asarray(scene.fingers.radius, dt), mu=jnp.asarray(scene.friction, dt),
-              depth=depth, step=step, event_tol=event_tol, newton_tol=jnp.asarray(newton_tol, dt),
-              gap_tol=jnp.asarray(gap_tol, dt), rotation=rot, invalid=jnp.array(-1, jnp.int32),
+    rot = xp.zeros((2, 1), dt) if rot is None else xp.asarray(rot, dt)
+    g = Grasp(grip=grip, radius=xp.asarray(scene.fingers.radius, dt), mu=xp.asarray(scene.friction, dt),
+              depth=depth, step=step, event_tol=event_tol, newton_tol=xp.asarray(newton_tol, dt),
+              gap_tol=xp.asarray(gap_tol, dt), rotation=rot, invalid=xp.asarray(-1, np.int32),
               placement=placement, adversary=adversary, curve=curve)
     if validated:
         return g
