@@ -447,8 +447,13 @@ def test_float32_demo_squeeze_keeps_its_contact_forces_exact():
                        timeout=300, env=env, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-3000:]
     r32 = json.loads(r.stdout.strip().splitlines()[-1])
-    r64 = jsq.squeeze(scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", "foam_square.toml")).scene)
+    demo = scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", "foam_square.toml")).scene
+    r64 = jsq.squeeze(demo)
     assert r32["status"] == r64.outcome.name == "SUCCESS" and r32["events"] >= 50
+    # the README: the demo fits the capacities an eager squeeze starts with (30 contacts, 8 sliding)
+    cfg = grasp_mod.eager_config(demo, demo.operator())
+    assert (cfg.capacity, cfg.sliding) == (32, 8)
+    assert np.max(np.sum(r64.modes > 0, 1)) == 30 and np.max(np.sum(r64.modes >= 2, 1)) == 8
     F32, F64 = np.array(r32["F"]), np.asarray(r64.total_force[-1])
     scale = np.abs(F64).max()
     assert np.abs(F32 - F64).max() < 1e-4 * scale
