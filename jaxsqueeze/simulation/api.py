@@ -165,7 +165,7 @@ def eager_config(scene: Scene, op: Compliance, history: bool = True) -> Config:
 
 def _grow_key(scene: Scene, op: Compliance, cfg: Config):
     s = scene.settings
-    return op.m, op.G.shape, s.capacity, s.sliding_capacity, dataclasses.replace(cfg, capacity=0, sliding=0)
+    return op.G.shape, s.capacity, s.sliding_capacity, dataclasses.replace(cfg, capacity=0, sliding=0)
 
 
 def _grown(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Config | None:

@@ -402,7 +402,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
         return lambda: solve_for(jnp.nonzero(sliding, size=Q, fill_value=S)[0], jnp.arange(Q) < n,
                                  jnp.clip(jnp.cumsum(sliding) - 1, 0, Q - 1), sliding)
 
-    if 0 < cfg.sliding < S:     # one system; more sliding slots are an overflow (engine.reconcile)
+    if cfg.sliding_limited:     # one system; more sliding slots are an overflow
         return lax.cond(n > 0, compact(cfg.sliding), still)
     if cfg.sliding or S <= COMPACT:
         return lax.cond(n > 0, full, still)

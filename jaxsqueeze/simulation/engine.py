@@ -217,7 +217,7 @@ def reconcile(model: Model, st: State) -> State:
     cfg = model.cfg
     was = st.slots.slot < cfg.capacity
     slots, over = contacts.update(model.op, st.slots, was, st.nodes.mode > FREE)
-    if 0 < cfg.sliding < cfg.capacity and cfg.newton:     # more sliding nodes than Newton slots
+    if cfg.sliding_limited:
         over = over | (jnp.sum(st.nodes.mode >= SLIP_POS) > cfg.sliding)
     fault = jnp.where(over & (st.fault == RUNNING), Status.OVERFLOW, st.fault).astype(jnp.int32)
     return _with(st, slots=slots, fault=fault)

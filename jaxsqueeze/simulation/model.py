@@ -48,6 +48,12 @@ class Config:
         return self.friction_model != "stick"
 
     @property
+    def sliding_limited(self) -> bool:
+        """One Newton system of ``sliding`` slots, fewer than the contact slots: more sliding
+        nodes stop the squeeze with an overflow (:func:`engine.reconcile`)."""
+        return self.newton and 0 < self.sliding < self.capacity
+
+    @property
     def slip_events(self) -> bool:   # events C and D
         return self.friction_model == "coulomb"
 
