@@ -117,8 +117,9 @@ def _deform(op: Compliance, slots, d):
 #                     M'^-1 = [[M^-1 + w Z w^T, -w Z], [-Z w^T, Z]]
 #   deactivate slot k M'^-1 (others) = P - q t^-1 q^T  for  M^-1 = [[P, q], [q^T, t]]
 #
-# (Schur complements of a 2x2 block). Both are exact; round-off grows at most linearly with
-# the number of updates (docs/numerics.md measures it).
+# (Schur complements of a 2x2 block). Both are exact, but their round-off compounds over many
+# updates on fine meshes; contacts.update checks the result and recomputes it then
+# (docs/numerics.md §3 measures it).
 def inv2(a: jax.Array) -> jax.Array:
     """Inverse of a (..., 2, 2) matrix (closed form; no LAPACK call, safe under ``vmap``)."""
     det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]

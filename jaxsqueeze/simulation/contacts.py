@@ -4,8 +4,9 @@ and the solve at one depth (Section IV-A; DESIGN 2.1, 2.4, 2.10).
 The contact set lives in ``capacity`` slots (:class:`Slots`). A slot holds one boundary node and
 its two DOFs of the bordered system (eq. 4); an empty slot has an identity block, so its force
 is 0. The inverse of the bordered matrix is kept with the slots and updated by bordering when a
-contact is made or broken (:func:`~jaxsqueeze.mechanics.bordered.inverse_activate`), never
-rebuilt, so a squeeze step costs O(S^2), not O(S^3).
+contact is made or broken (:func:`~jaxsqueeze.mechanics.bordered.inverse_activate`), so a
+squeeze step costs O(S^2), not O(S^3); it is recomputed from the matrix only when a check after
+a change finds that the updates' round-off has built up (:func:`drift`, ``DRIFT_TOL``).
 
 :func:`solve` evaluates a configuration at a depth d: the prescribed positions of the contact
 nodes on the fingertips, the slip angles of sliding nodes (system S, eq. 6, by Newton with the
@@ -35,7 +36,7 @@ from jax import lax
 
 from ..geometry import boundary
 from ..mechanics import linalg
-from ..mechanics.bordered import inverse_activate, inverse_deactivate, slot_dofs
+from ..mechanics.bordered import bordered_matrix, inverse_activate, inverse_deactivate, slot_dofs
 from ..mechanics.operator import Compliance
 from . import laws
 from .laws import FREE, SLIP_NEG, SLIP_POS, STICK
@@ -46,6 +47,15 @@ from .model import Model, gap_to_fingers
 NEUTRAL_REG = 1.0
 #: sliding slots solved in a compact system of this size when they fit (else all S slots)
 COMPACT = 16
+#: the kept inverse is recomputed from the bordered matrix (an O(S³) LU) when its backward
+#: error (:func:`drift`) exceeds this after a contact set change (float64, float32). Each
+#: bordering update subtracts the part of a node's compliance that the nodes in contact
+#: already explain; on fine meshes neighbours explain almost all of it, digits are lost and the
+#: loss compounds from update to update. The demo square with 0.4 mm contact zones had its
+#: contact nodes 0.1 µm off their fingertips after 140 rows without this, a new contact pulled
+#: by that much stiffness, was dropped, and the squeeze STALLED at 13 mm; the default demo
+#: ends at 3e-13 and never recomputes.
+DRIFT_TOL = (1e-12, 1e-4)
 
 
 def unit(a):
@@ -142,35 +152,77 @@ def deactivate(sl: Slots, k) -> Slots:
 def update(op: Compliance, sl: Slots, old_on, new_on):
     """Slots for the contact set ``new_on`` (m,) bool, from the slots of ``old_on``: every node
     that left is deactivated and every node that joined takes the first empty slot, one update
-    each. Returns (slots, overflow): overflow when a joining node found no empty slot (it is
-    then left out, and the caller reports ``Status.OVERFLOW``)."""
-    m = old_on.shape[0]
+    each; then, if anything changed, the kept inverse is checked and recomputed if it has
+    drifted (:func:`drift`). Returns (slots, overflow): overflow when a joining node found no
+    empty slot (it is then left out, and the caller reports ``Status.OVERFLOW``).
+
+    One ``while_loop`` whose iterations are the stages (drop, add, check, refresh) keeps the
+    slots in place: a ``cond`` around the check would copy them on every call."""
     leave = old_on & ~new_on
     join = new_on & ~old_on
+    tol = DRIFT_TOL[1] if sl.Minv.dtype == jnp.float32 else DRIFT_TOL[0]
 
     def cond(c):
-        _, leave, join, _ = c
-        return jnp.any(leave) | jnp.any(join)
+        _, leave, join, _, todo = c
+        return jnp.any(leave) | jnp.any(join) | (todo > 0)
 
     def body(c):
-        sl, leave, join, over = c
+        sl, leave, join, over, todo = c
 
         def drop():
             p = jnp.argmax(leave)
-            return deactivate(sl, sl.slot[p].astype(int)), leave.at[p].set(False), join, over
+            return deactivate(sl, sl.slot[p].astype(int)), leave.at[p].set(False), join, over, todo
 
         def add():
             p = jnp.argmax(join)
             free = sl.node < 0
             k = jnp.argmax(free)
             sl2 = lax.cond(jnp.any(free), lambda: activate(op, sl, k, p), lambda: sl)
-            return sl2, leave, join.at[p].set(False), over | ~jnp.any(free)
+            return sl2, leave, join.at[p].set(False), over | ~jnp.any(free), todo
 
-        return lax.cond(jnp.any(leave), drop, add)
+        def check():
+            return sl, leave, join, over, jnp.where(drift(op, sl) > tol, 2, 0).astype(jnp.int32)
 
-    sl, _, _, over = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False)))
-    del m
+        def refresh():
+            return sl._replace(Minv=linalg.inv(bordered_matrix_of(op, sl))), leave, join, over, jnp.array(0, jnp.int32)
+
+        stage = jnp.where(jnp.any(leave), 0, jnp.where(jnp.any(join), 1, todo + 1))
+        return lax.switch(stage, [drop, add, check, refresh])
+
+    todo = jnp.where(jnp.any(leave | join), 1, 0).astype(jnp.int32)
+    sl, _, _, over, _ = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False), todo))
     return sl, over
+
+
+def drift(op: Compliance, sl: Slots):
+    """() how far the kept inverse is from the inverse of the bordered matrix M: the
+    componentwise backward error max |M z − y| / (|M| |z| + |y|) of z = M⁻¹ y for a fixed
+    probe y (0 for an exact inverse, a small multiple of eps for a fresh LU inverse)."""
+    n = sl.Minv.shape[0]
+    y = jnp.cos(jnp.arange(n, dtype=sl.Minv.dtype))
+    z = sl.Minv @ y
+    r = bordered_times(op, sl, z) - y
+    scale = bordered_times(op, sl, jnp.abs(z), jnp.abs) + jnp.abs(y)
+    return jnp.max(jnp.abs(r) / scale)
+
+
+def bordered_matrix_of(op: Compliance, sl: Slots):
+    """(2S + 3, 2S + 3) the bordered matrix M of eq. (4) over the slots (identity blocks at
+    empty slots)."""
+    dofs = slot_dofs(jnp.where(sl.active, sl.node, 0))
+    return bordered_matrix(sl.Gc[dofs], op.N[dofs], sl.active)
+
+
+def bordered_times(op: Compliance, sl: Slots, z, elementwise=lambda a: a):
+    """M z for the bordered matrix M of eq. (4) over the slots, without forming M
+    (``elementwise=jnp.abs``: |M| z)."""
+    S = sl.node.shape[0]
+    f, g = z[: 2 * S], z[2 * S:]
+    dofs = slot_dofs(jnp.where(sl.active, sl.node, 0))
+    on = jnp.repeat(sl.active, 2)
+    A = elementwise(sl.Gc[dofs])
+    B = elementwise(jnp.where(on[:, None], op.N[dofs], 0.0))
+    return jnp.concatenate([jnp.where(on, A @ f + B @ g, f), B.T @ f])
 
 
 # ----------------------------------------------------------------------------- one configuration
@@ -244,18 +296,8 @@ def _linear(model: Model, sl: Slots, v: _View, p):
     if rhs.dtype == jnp.float32:
         # the inverse kept by bordering updates drifts in float32 (3e-4 after ~60 contacts made
         # and broken, docs/numerics.md §3): one step of iterative refinement against M itself
-        z = z + sl.Minv @ (rhs - _bordered_times(model, sl, v, z))
+        z = z + sl.Minv @ (rhs - bordered_times(model.op, sl, z))
     return z[: 2 * S].reshape(S, 2), z[2 * S:]
-
-
-def _bordered_times(model: Model, sl: Slots, v: _View, z):
-    """M z for the bordered matrix M of eq. (4) over the slots (identity blocks at empty slots)."""
-    S = v.idx.shape[0]
-    f, g = z[: 2 * S], z[2 * S:]
-    dofs = slot_dofs(v.idx)
-    on = jnp.repeat(v.active, 2)
-    B = jnp.where(on[:, None], model.op.N[dofs], 0.0)
-    return jnp.concatenate([jnp.where(on, sl.Gc[dofs] @ f + B @ g, f), B.T @ f])
 
 
 def _block_form(sl: Slots, sel):

@@ -193,6 +193,34 @@ def test_update_makes_and_breaks_contacts_keeping_the_inverse_and_the_node_map(m
     np.testing.assert_allclose(np.asarray(sl.Minv), np.linalg.inv(M), rtol=0, atol=1e-8 * np.abs(np.linalg.inv(M)).max())
 
 
+def test_update_recomputes_a_drifted_inverse_and_keeps_a_sound_one(model):
+    """contacts.update checks the kept inverse after a contact change (its backward error on a
+    probe, contacts.drift): one that has drifted beyond DRIFT_TOL (here perturbed by 1e-8) is
+    recomputed from the bordered matrix; one within it is the bordering update's own, bit for
+    bit (no LU on the way)."""
+    contacts = engine.contacts
+    op, S = model.op, model.cfg.capacity
+    i, j = (int(v) for v in np.asarray(model.grip))
+    a, b = (i + 1) % op.m, (i - 1) % op.m
+    on = lambda *ps: jnp.zeros(op.m, bool).at[jnp.array(ps)].set(True)  # noqa: E731
+    upd = jax.jit(lambda sl, old, new: contacts.update(op, sl, old, new))
+    sl, _ = upd(contacts.pair(op, S, i, j), on(i, j), on(i, j, a))
+    fresh = lambda s: np.linalg.inv(np.asarray(contacts.bordered_matrix_of(op, s)))  # noqa: E731
+    assert float(contacts.drift(op, sl)) < 1e-14
+    bump = 1 + 1e-8 * np.cos(np.arange(sl.Minv.size)).reshape(sl.Minv.shape)
+    bad = sl._replace(Minv=sl.Minv * bump)
+    assert float(contacts.drift(op, bad)) > contacts.DRIFT_TOL[0]
+    healed, _ = upd(bad, on(i, j, a), on(i, j, a, b))
+    assert float(contacts.drift(op, healed)) < 1e-14
+    ref = fresh(healed)
+    np.testing.assert_allclose(np.asarray(healed.Minv), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    # a sound inverse: the bordering update alone, no recomputation
+    kept, _ = upd(sl, on(i, j, a), on(i, j, a, b))
+    k = int(np.argmax(np.asarray(sl.node) < 0))
+    alone = jax.jit(lambda s: contacts.activate(op, s, k, b))(sl)
+    np.testing.assert_array_equal(np.asarray(kept.Minv), np.asarray(alone.Minv))
+
+
 def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
     """check: after an event at the depth the squeeze already stood at, a contact set that came
     back to the modes from before the event would repeat forever: STALLED (a fault that finish
