@@ -11,11 +11,12 @@ Knobs:
   1/sqrt2, 1/2 (max_edge 24, 17, 12, 8.5, 6 mm; refine_edge 4, 2.8, 2, 1.4, 1 mm; the last is
   the scene file's mesh), against a reference 2x finer than the finest member, s = 1/4
   (3 mm / 0.5 mm, 4,250 nodes). ``--reference S`` moves the whole series (members 2 to 8
-  times coarser than the reference). A finer reference is not possible yet: the squeeze
-  fails on finer contact zones (refine_edge 0.4 / 0.35 mm: STALLED at 13.0 / 10.6 mm;
-  0.3 / 0.25 mm: SLIP_FAILURE in the first 0.1 mm, the same with the engine before the
-  rewrite), so ``--reference 0.125`` (the series 12 ... 3 mm against 1.5 mm / 0.25 mm) only
-  becomes usable once that is fixed.
+  times coarser than the reference). The demo's grip has no finer reference: from 0.35 mm
+  contact zones down the squeeze ends with SLIP_FAILURE in its first 0.1 mm (0.35 mm at 0.10,
+  0.3 mm at 0.079 mm, the same with the engine before the rewrite: the paper's rule that a
+  finger whose contacts all slide has lost the grip, see benchmarks/README.md); 0.4 mm
+  (6,382 nodes) reaches 15 mm since the kept bordered inverse is checked for drift
+  (it STALLED at 13.0 mm before). The centred series below has the much finer reference.
   The meshes are built with ``jsq.shapes.rectangle`` as the scene file's loader builds them
   (the zone radius stays the file's 2 x 6 mm; the loader itself refuses the 1.5 mm / 0.25 mm
   mesh on its pre-meshing size estimate). Only the grading between the two zones
@@ -26,12 +27,13 @@ Knobs:
   the timed program used, contact / sliding slots). The order of convergence p of each error is the least-squares slope
   of log(error) against log(h), h = refine_edge (the spacing of the boundary nodes in the
   contact zone; max_edge is proportional to it, so the slope is the same for either).
-* ``mesh, centred grip``: a second mesh series with a much finer reference, on a scene where
-  one reaches the target depth: the same square gripped at the middles of two opposite edges,
-  mu = 0.5, squeezed 4 mm; contact zones refined to 4, 2.8, 2, 1.4 and 1 mm (max_edge 6 x
-  that) against 0.25 mm (15,442 nodes; 4 x finer than the finest member, 16 x the coarsest).
-  (At 0.25 mm this grip STALLS at 5.1 mm, so its depth stays at 4 mm.) It has its own fitted
-  orders and is left out of the Pareto front and the recommendations, which are the demo's.
+* ``mesh, centred grip``: a second mesh series with a much finer reference: the same square
+  gripped at the middles of two opposite edges, mu = 0.5, squeezed 15 mm like the demo;
+  contact zones refined to 4, 2.8, 2, 1.4, 1, 0.7 and 0.5 mm (max_edge 6 x that, uniform x
+  sqrt2 refinement) against 0.25 mm (15,442 nodes; 2 x finer than the finest member, 16 x the
+  coarsest). (Until the kept inverse was checked for drift this grip STALLED at 5.1 mm on the
+  0.25 mm mesh and the series ran to 4 mm.) It has its own fitted orders and is left out of
+  the Pareto front and the recommendations, which are the demo's.
 * ``step``: squeeze step depth/10 ... depth/200 (default depth/50).
 * ``event_tol``: step x 1e-1 ... 1e-9 (default step x 1e-4).
 * ``newton_tol``: 1e-3 ... 1e-13 rad (default 1e-11 in float64).
@@ -117,12 +119,12 @@ MEMBERS = (8, 4 * 2 ** 0.5, 4, 2 * 2 ** 0.5, 2)   # scales of the mesh series ov
 CONTACT_WIDTH = 0.014                         # finger 0's contact width at 15 mm (measured) [m]
 LEVELS = (1e-2, 1e-3, 1e-4)
 #: a second mesh series whose reference is much finer: the same square gripped at the middles of
-#: two opposite edges, mu = 0.5, squeezed 4 mm (the demo's grip has no finer reference that
+#: two opposite edges, mu = 0.5, squeezed 15 mm (the demo's grip has no finer reference that
 #: reaches 15 mm, see the docstring). Not part of the Pareto front and the recommendations,
 #: which are for the demo scene.
 CENTRED_KNOB = "mesh, centred grip"
-CENTRED = dict(points=((0.0, -0.05), (0.0, 0.05)), friction=0.5, depth=0.004)
-CENTRED_EDGES = (0.004, 0.0028, 0.002, 0.0014, 0.001, 0.00025)   # refine_edge of the members and the reference [m]
+CENTRED = dict(points=((0.0, -0.05), (0.0, 0.05)), friction=0.5, depth=DEPTH)
+CENTRED_EDGES = (0.004, 0.0028, 0.002, 0.0014, 0.001, 0.0007, 0.0005, 0.00025)   # refine_edge of the members and the reference [m]
 SHARED_BUILD = ("step", "event_tol", "newton_tol")   # knobs that keep the default operator: its build time
 COLUMNS = ["knob", "setting", "reference", "nodes", "boundary", "capacity", "spacing_mm", "time_s", "build_s",
            "total_s", "force_err", "width_err", "width_mm", "event_err", "unmatched", "rows", "status",
@@ -484,7 +486,7 @@ def plot_knobs(rows, path, info):
             ax.legend(fontsize=7, loc="best")
     for ax in list(axs.flat)[len(knobs_):]:
         ax.axis("off")
-    fig.suptitle(f"foam square 15 % squeeze (last panel: centred grip, 4 mm): error vs time per knob "
+    fig.suptitle(f"foam square 15 % squeeze (last panel: centred grip, mu = 0.5): error vs time per knob "
                  f"(floor 1e-16) — {info}", fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
