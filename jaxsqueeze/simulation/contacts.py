@@ -156,8 +156,8 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
     drifted (:func:`drift`). Returns (slots, overflow): overflow when a joining node found no
     empty slot (it is then left out, and the caller reports ``Status.OVERFLOW``).
 
-    One ``while_loop`` whose iterations are the stages (drop, add, check, refresh) keeps the
-    slots in place: a ``cond`` around the check would copy them on every call."""
+    One ``while_loop`` whose iterations are the stages (drop, add, full, check, refresh) keeps
+    the slots in place: a ``cond`` around a stage would copy them."""
     leave = old_on & ~new_on
     join = new_on & ~old_on
     tol = DRIFT_TOL[1] if sl.Minv.dtype == jnp.float32 else DRIFT_TOL[0]
@@ -175,10 +175,10 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
 
         def add():
             p = jnp.argmax(join)
-            free = sl.node < 0
-            k = jnp.argmax(free)
-            sl2 = lax.cond(jnp.any(free), lambda: activate(op, sl, k, p), lambda: sl)
-            return sl2, leave, join.at[p].set(False), over | ~jnp.any(free), todo
+            return activate(op, sl, jnp.argmax(sl.node < 0), p), leave, join.at[p].set(False), over, todo
+
+        def full():         # no empty slot left for the nodes still joining: they stay out
+            return sl, leave, jnp.zeros_like(join), jnp.array(True), todo
 
         def check():
             return sl, leave, join, over, jnp.where(drift(op, sl) > tol, 2, 0).astype(jnp.int32)
@@ -186,8 +186,8 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
         def refresh():
             return sl._replace(Minv=linalg.inv(bordered_matrix_of(op, sl))), leave, join, over, jnp.array(0, jnp.int32)
 
-        stage = jnp.where(jnp.any(leave), 0, jnp.where(jnp.any(join), 1, todo + 1))
-        return lax.switch(stage, [drop, add, check, refresh])
+        stage = jnp.where(jnp.any(leave), 0, jnp.where(jnp.any(join), jnp.where(jnp.any(sl.node < 0), 1, 2), todo + 2))
+        return lax.switch(stage, [drop, add, full, check, refresh])
 
     todo = jnp.where(jnp.any(leave | join), 1, 0).astype(jnp.int32)
     sl, _, _, over, _ = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False), todo))
