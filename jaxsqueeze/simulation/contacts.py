@@ -153,8 +153,9 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
     """Slots for the contact set ``new_on`` (m,) bool, from the slots of ``old_on``: every node
     that left is deactivated and every node that joined takes the first empty slot, one update
     each; then, if anything changed, the kept inverse is checked and recomputed if it has
-    drifted (:func:`drift`). Returns (slots, overflow): overflow when a joining node found no
-    empty slot (it is then left out, and the caller reports ``Status.OVERFLOW``).
+    drifted (:func:`drift`). Returns (slots, overflow, refreshed): overflow when a joining node
+    found no empty slot (it is then left out, and the caller reports ``Status.OVERFLOW``);
+    refreshed when the inverse was recomputed.
 
     One ``while_loop`` whose iterations are the stages (drop, add, full, check, refresh) keeps
     the slots in place: a ``cond`` around a stage would copy them."""
@@ -163,35 +164,36 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
     tol = DRIFT_TOL[1] if sl.Minv.dtype == jnp.float32 else DRIFT_TOL[0]
 
     def cond(c):
-        _, leave, join, _, todo = c
+        _, leave, join, _, todo, _ = c
         return jnp.any(leave) | jnp.any(join) | (todo > 0)
 
     def body(c):
-        sl, leave, join, over, todo = c
+        sl, leave, join, over, todo, fresh = c
 
         def drop():
             p = jnp.argmax(leave)
-            return deactivate(sl, sl.slot[p].astype(int)), leave.at[p].set(False), join, over, todo
+            return deactivate(sl, sl.slot[p].astype(int)), leave.at[p].set(False), join, over, todo, fresh
 
         def add():
             p = jnp.argmax(join)
-            return activate(op, sl, jnp.argmax(sl.node < 0), p), leave, join.at[p].set(False), over, todo
+            return activate(op, sl, jnp.argmax(sl.node < 0), p), leave, join.at[p].set(False), over, todo, fresh
 
         def full():         # no empty slot left for the nodes still joining: they stay out
-            return sl, leave, jnp.zeros_like(join), jnp.array(True), todo
+            return sl, leave, jnp.zeros_like(join), jnp.array(True), todo, fresh
 
         def check():
-            return sl, leave, join, over, jnp.where(drift(op, sl) > tol, 2, 0).astype(jnp.int32)
+            return sl, leave, join, over, jnp.where(drift(op, sl) > tol, 2, 0).astype(jnp.int32), fresh
 
         def refresh():
-            return sl._replace(Minv=linalg.inv(bordered_matrix_of(op, sl))), leave, join, over, jnp.array(0, jnp.int32)
+            Minv = linalg.inv(bordered_matrix_of(op, sl))
+            return sl._replace(Minv=Minv), leave, join, over, jnp.array(0, jnp.int32), jnp.array(True)
 
         stage = jnp.where(jnp.any(leave), 0, jnp.where(jnp.any(join), jnp.where(jnp.any(sl.node < 0), 1, 2), todo + 2))
         return lax.switch(stage, [drop, add, full, check, refresh])
 
     todo = jnp.where(jnp.any(leave | join), 1, 0).astype(jnp.int32)
-    sl, _, _, over, _ = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False), todo))
-    return sl, over
+    sl, _, _, over, _, fresh = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False), todo, jnp.array(False)))
+    return sl, over, fresh
 
 
 def drift(op: Compliance, sl: Slots):

@@ -66,6 +66,7 @@ class Stats(NamedTuple):
     bracket_iters: jax.Array   # event-location solves, summed
     residual: jax.Array        # largest final Newton update [rad] of an accepted solve
     solves: jax.Array          # configuration solves (loop iterations), all phases
+    refreshes: jax.Array       # recomputations of the kept bordered inverse (contacts.update)
 
 
 class Bracket(NamedTuple):
@@ -182,7 +183,7 @@ def init(model: Model) -> State:
         events=(z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
         hist=(z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
               z((H, m, 2), dt), z((H, F, 2), dt), z((H, F), dt), z((H, 3), dt), z(H, dt)),
-        count=i32(0), stats=Stats(*(i32(0),) * 5, zero, i32(0)), squeeze_status=i32(RUNNING),
+        count=i32(0), stats=Stats(*(i32(0),) * 5, zero, i32(0), i32(0)), squeeze_status=i32(RUNNING),
         margin=model.margin, grip=model.grip, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt))
 
 
@@ -216,11 +217,12 @@ def reconcile(model: Model, st: State) -> State:
     slots change: stages change modes; the slots follow, one bordering update per node)."""
     cfg = model.cfg
     was = st.slots.slot < cfg.capacity
-    slots, over = contacts.update(model.op, st.slots, was, st.nodes.mode > FREE)
+    slots, over, fresh = contacts.update(model.op, st.slots, was, st.nodes.mode > FREE)
     if cfg.sliding_limited:
         over = over | (jnp.sum(st.nodes.mode >= SLIP_POS) > cfg.sliding)
     fault = jnp.where(over & (st.fault == RUNNING), Status.OVERFLOW, st.fault).astype(jnp.int32)
-    return _with(st, slots=slots, fault=fault)
+    stats = st.stats._replace(refreshes=st.stats.refreshes + fresh)
+    return _with(st, slots=slots, fault=fault, stats=stats)
 
 
 def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:

@@ -76,7 +76,8 @@ class SqueezeResult:
     grip: (2,) mesh node indices of the two initial contacts (finger 0, finger 1).
     radius: () fingertip radius [m].
     stats: :class:`~jaxsqueeze.simulation.engine.Stats` (steps, events, Newton and bracket
-        iterations, largest Newton residual).
+        iterations, largest Newton residual, solves, recomputations of the kept bordered
+        inverse).
     invalid: () int, index into ``validate.FIELDS`` of the first invalid input, -1 if none.
     margin: () smooth feasibility margin of the grip [rad]: the friction angle minus the larger
         angle between the segment joining the first contacts and their inward normals; < 0
