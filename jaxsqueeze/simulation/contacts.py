@@ -191,7 +191,7 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
         stage = jnp.where(jnp.any(leave), 0, jnp.where(jnp.any(join), jnp.where(jnp.any(sl.node < 0), 1, 2), todo + 2))
         return lax.switch(stage, [drop, add, full, check, refresh])
 
-    todo = jnp.where(jnp.any(leave | join), 1, 0).astype(jnp.int32)
+    todo = jnp.where(jnp.any(leave | join), 1, 0).astype(jnp.int32)     # 1: check the inverse, 2: recompute it
     sl, _, _, over, _, fresh = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False), todo, jnp.array(False)))
     return sl, over, fresh
 
