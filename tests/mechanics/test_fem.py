@@ -221,6 +221,40 @@ def test_patch_test_linear_field(name, method):
     assert rel_err(f, traction_forces(mesh, sigma, MAT.thickness)[b]) <= 1e-9
 
 
+def test_converges_at_second_order_to_an_exact_solution():
+    """Convergence under mesh refinement against an exact plane-stress solution that linear
+    triangles cannot represent: u = grad(phi) with the harmonic phi = a^2 e^(x/a) cos(y/a) has
+    div u = 0 and curl u = 0, so it satisfies Navier's equations without body force for any
+    E and nu. Prescribed on every boundary node through the bordered system (jsq.deform), the
+    interior displacement converges at second order (nodal error ~ h^2), and the element
+    strains at first order (structured meshes, so the refinement is exactly uniform)."""
+    a = 0.05
+    exact = lambda P: 1e-3 * a * np.exp(P[:, 0] / a)[:, None] * np.c_[np.cos(P[:, 1] / a), -np.sin(P[:, 1] / a)]  # noqa: E731
+    errs, strain_errs = [], []
+    for k in (8, 16, 32):             # uniform refinement: k x k squares of a 0.1 m square, two triangles each
+        g = np.linspace(-0.05, 0.05, k + 1)
+        X, Y = np.meshgrid(g, g, indexing="ij")
+        n = np.arange((k + 1) ** 2).reshape(k + 1, k + 1)
+        q = np.c_[n[:-1, :-1].ravel(), n[1:, :-1].ravel(), n[1:, 1:].ravel(), n[:-1, 1:].ravel()]
+        mesh = jsq.Mesh.from_arrays(np.c_[X.ravel(), Y.ravel()], np.r_[q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+        P = mesh.points + mesh.offset                    # the user's frame: the field is not translation-free
+        u_ex = exact(P)
+        sol = jsq.deform(fem.compliance(mesh, MAT), mesh.boundary, u_ex[mesh.boundary])
+        u = np.asarray(sol.displacement)
+        errs.append(np.abs(u - u_ex)[interior(mesh)].max() / np.abs(u_ex).max())
+        grad = element_gradients(mesh.points, mesh.triangles, u)
+        c = P[mesh.triangles].mean(axis=1)              # the exact strain at element centroids
+        e = 1e-3 * np.exp(c[:, 0] / a)
+        exact_grad = np.stack([np.c_[e * np.cos(c[:, 1] / a), -e * np.sin(c[:, 1] / a)],
+                               np.c_[-e * np.sin(c[:, 1] / a), -e * np.cos(c[:, 1] / a)]], axis=1)
+        strain_errs.append(np.abs(grad - exact_grad).max() / np.abs(exact_grad).max())
+    order = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    strain_order = np.log2(np.array(strain_errs[:-1]) / np.array(strain_errs[1:]))
+    print("exact-solution convergence: nodal errors", errs, "orders", order, "strain orders", strain_order)
+    assert errs[-1] < 1e-3
+    assert np.all(order > 1.8) and np.all(strain_order > 0.9)
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_uniaxial_tension_of_rectangle(method):
     mesh, op = mesh_of("rectangle"), op_of("rectangle", method)
