@@ -26,6 +26,22 @@ def square():
     return jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.01), grip=grip, friction=0.5, depth=0.01)
 
 
+def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellipse):
+    """A map's spacing must be a finite arc length > 0 and leave at most 10 positions per
+    boundary node (a map squeezes every pair); an eager squeeze takes one placement (s of
+    shape (2,), a scalar angle). Each is a ValueError that says so, and nothing compiles."""
+    from jaxsqueeze.simulation import api
+    before = api._run._cache_size()
+    for spacing in (-1.0, 0.0, float("nan")):
+        with pytest.raises(ValueError, match="finite arc length > 0"):
+            jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
+    with pytest.raises(ValueError, match="more than 10 per boundary node"):
+        jsq.grasp_map(ellipse, "squeeze_work", spacing=1e-6)
+    with pytest.raises(ValueError, match="one placement"):
+        jsq.squeeze(ellipse.replace(placement=plan.Placement(s=(0.0, 0.1), angle=(0.1, 0.0))))
+    assert api._run._cache_size() == before
+
+
 def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
     """Fingers placed by arc length at the grip nodes touch those nodes first, and the squeeze
     is the integer-grip squeeze."""
