@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..geometry import boundary
+from ..tracing import is_concrete
 from .operator import Compliance, field_displacement
 
 
@@ -92,6 +93,10 @@ def deform(op: Compliance, nodes, displacements) -> Deformation:
     d = jnp.asarray(displacements, op.G.dtype)
     if d.shape != (s, 2):
         raise ValueError(f"displacements must have shape ({s}, 2), got {tuple(d.shape)}.")
+    if is_concrete(d) and not np.all(np.isfinite(np.asarray(d))):
+        bad = np.flatnonzero(~np.all(np.isfinite(np.asarray(d)), axis=1))
+        raise ValueError(f"displacements of node(s) {np.asarray(nodes).reshape(-1)[bad].tolist()} are not finite; "
+                         "give finite displacements [m].")
     return _deform(op, jnp.asarray(slots), d)
 
 

@@ -67,7 +67,8 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         forces = _is_band(mesh)
     r = views.row_index(res, row)
     last = r == len(np.asarray(res.depth)) - 1
-    if ax is None and zoom is None and details:
+    placed = bool(np.all(np.isfinite(np.asarray(res.centres[r], float))))   # not so: a placement that never touched
+    if ax is None and zoom is None and details and placed:
         fig = Figure(figsize=(11, 7), dpi=DPI, layout="constrained")
         gs = fig.add_gridspec(2, 2, width_ratios=[1.6, 1.0])
         ax = fig.add_subplot(gs[:, 0])
@@ -111,7 +112,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     # fingertips
     C = np.asarray(res.centres[r], float) + off
     rad = float(res.radius)
-    for f in (0, 1):
+    for f in (0, 1) if placed else ():
         ax.add_patch(Circle(C[f] * MM, rad * MM, facecolor=FINGER_COLORS[f], alpha=0.18,
                             edgecolor=FINGER_COLORS[f], lw=1.5, zorder=4))
         ax.plot(*(C[f] * MM), "+", color=FINGER_COLORS[f], ms=8, zorder=4)

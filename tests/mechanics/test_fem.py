@@ -417,6 +417,8 @@ def test_deform_errors():
         jsq.deform(op, b[:3], np.zeros((2, 2)))
     with pytest.raises(ValueError, match=r"shape \(2, 2\)"):
         jsq.deform(op, b[:2], np.zeros(4))
+    with pytest.raises(ValueError, match=rf"node\(s\) \[{int(b[1])}\] are not finite"):
+        jsq.deform(op, b[:2], np.array([[0.0, 0.0], [np.nan, 0.0]]))
     with pytest.raises(ValueError, match=r"method"):
         fem.compliance(mesh, MAT, "cholesky")
 

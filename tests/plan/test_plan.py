@@ -1,4 +1,6 @@
 """Grasp planning (DESIGN 2.9): continuous placement, qualities, maps and search."""
+import os
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -87,6 +89,21 @@ def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
     cands = plan.candidate_pairs(ellipse, spacing=P / 12)
     assert len(cands) > 0
     assert np.all(plan.evaluate(ellipse, cands[:2], progress=False).margin >= 0)
+
+
+def test_a_placement_without_a_squeeze_line_still_plots(ellipse, tmp_path):
+    """An eager squeeze of both fingers placed at one point has no squeeze line: INFEASIBLE_GRIP
+    with no fingertip positions (NaN centres); the plots still draw the object and say the
+    status instead of failing inside matplotlib."""
+    import warnings
+
+    missed = ellipse.replace(placement=plan.Placement(s=(0.1, 0.1)))
+    res = jsq.squeeze(missed)
+    assert res.outcome == jsq.Status.INFEASIBLE_GRIP and not np.all(np.isfinite(res.centres))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")        # all-NaN rows: numpy and matplotlib warn
+        paths = jsq.plots.save_all(res, missed, str(tmp_path))
+    assert all(os.path.getsize(p) > 0 for p in paths.values())
 
 
 def test_squeeze_work_is_the_work_of_the_squeezing_finger(square):
