@@ -93,8 +93,8 @@ def deform(op: Compliance, nodes, displacements) -> Deformation:
     d = jnp.asarray(displacements, op.G.dtype)
     if d.shape != (s, 2):
         raise ValueError(f"displacements must have shape ({s}, 2), got {tuple(d.shape)}.")
-    if is_concrete(d) and not np.all(np.isfinite(np.asarray(d))):
-        bad = np.flatnonzero(~np.all(np.isfinite(np.asarray(d)), axis=1))
+    bad = np.flatnonzero(~np.all(np.isfinite(np.asarray(d)), axis=1)) if is_concrete(d) else []
+    if len(bad):
         raise ValueError(f"displacements of node(s) {np.asarray(nodes).reshape(-1)[bad].tolist()} are not finite; "
                          "give finite displacements [m].")
     return _deform(op, jnp.asarray(slots), d)

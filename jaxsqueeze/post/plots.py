@@ -67,7 +67,8 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         forces = _is_band(mesh)
     r = views.row_index(res, row)
     last = r == len(np.asarray(res.depth)) - 1
-    placed = bool(np.all(np.isfinite(np.asarray(res.centres[r], float))))   # not so: a placement that never touched
+    # no fingertips to draw or zoom on when a placement never found its squeeze line (NaN centres)
+    placed = bool(np.all(np.isfinite(np.asarray(res.centres[r], float))))
     if ax is None and zoom is None and details and placed:
         fig = Figure(figsize=(11, 7), dpi=DPI, layout="constrained")
         gs = fig.add_gridspec(2, 2, width_ratios=[1.6, 1.0])
