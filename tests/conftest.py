@@ -7,23 +7,24 @@ os.environ["JAXSQUEEZE_NO_CACHE"] = "1"
 
 
 def _faster_compiles():
-    """Compile the suite's programs without XLA:CPU's fusion emitters, as the library does for
-    its own top-level programs (jaxsqueeze.compiler): 22-36 % less XLA compile time, same
-    run time and numbers (benchmarks/README.md, "Compilation and host work"); here as an XLA
-    flag, so the tests' own jits get it too. The flag is added only where this jaxlib knows
-    it (an unknown XLA flag aborts the process), probed once in a child and passed on to
-    pytest-xdist workers and notebook kernels through the environment."""
+    """Compile the suite's programs with the options the library uses for its own top-level
+    programs (jaxsqueeze.compiler: XLA:CPU's fusion emitters off, LLVM optimisation level 1):
+    less XLA compile time, same run time and numbers (benchmarks/README.md, "Compilation and
+    host work"); here as XLA flags, so the tests' own jits get them too. A flag is added only
+    where this jaxlib knows it (an unknown XLA flag aborts the process), probed once in a child
+    and passed on to pytest-xdist workers and notebook kernels through the environment."""
     import subprocess
     import sys
-    flag = "--xla_cpu_use_fusion_emitters=false"
-    if os.environ.get("JAXSQUEEZE_TEST_FLAGS_PROBED") or flag in os.environ.get("XLA_FLAGS", ""):
+    flags = ["--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=1"]
+    if os.environ.get("JAXSQUEEZE_TEST_FLAGS_PROBED") or flags[0] in os.environ.get("XLA_FLAGS", ""):
         return
     os.environ["JAXSQUEEZE_TEST_FLAGS_PROBED"] = "1"
-    env = dict(os.environ, XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " " + flag).strip(), JAX_PLATFORMS="cpu")
-    probe = subprocess.run([sys.executable, "-c", "import jax; jax.numpy.zeros(1).block_until_ready()"], env=env,
-                           capture_output=True)
-    if probe.returncode == 0:
-        os.environ["XLA_FLAGS"] = env["XLA_FLAGS"]
+    for flag in flags:
+        env = dict(os.environ, XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " " + flag).strip(), JAX_PLATFORMS="cpu")
+        probe = subprocess.run([sys.executable, "-c", "import jax; jax.numpy.zeros(1).block_until_ready()"], env=env,
+                               capture_output=True)
+        if probe.returncode == 0:
+            os.environ["XLA_FLAGS"] = env["XLA_FLAGS"]
 
 
 _faster_compiles()

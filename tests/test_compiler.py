@@ -22,9 +22,10 @@ def _f(x, k):
 
 def test_top_level_calls_use_the_options_and_traced_calls_the_plain_jit(fresh_options):
     full = tuple(sorted(compiler.CPU_OPTIONS.items()))
-    assert compiler.options() in ((), full)
+    assert set(compiler.options()) <= set(full)
     if jax.default_backend() == "cpu" and "--xla_cpu_use_fusion_emitters=false" in os.environ.get("XLA_FLAGS", ""):
-        assert compiler.options() == full      # conftest's probe found that this jaxlib knows the option
+        # conftest's probe found that this jaxlib knows the option
+        assert ("xla_cpu_use_fusion_emitters", False) in compiler.options()
     f = compiler.jit(_f, static_argnums=(1,))
     x = jnp.linspace(0.0, 1.0, 5)
     np.testing.assert_array_equal(f(x, 2.0), _f(x, 2.0))
@@ -39,6 +40,11 @@ def test_top_level_calls_use_the_options_and_traced_calls_the_plain_jit(fresh_op
 
 
 def test_an_option_this_jaxlib_rejects_is_left_out(fresh_options):
+    if jax.default_backend() == "cpu":   # the others are kept
+        fresh_options.setattr(compiler, "CPU_OPTIONS", {"xla_cpu_no_such_option_in_any_jaxlib": True,
+                                                        "xla_backend_optimization_level": 1})
+        assert compiler.options() == (("xla_backend_optimization_level", 1),)
+        compiler.options.cache_clear()
     fresh_options.setattr(compiler, "CPU_OPTIONS", {"xla_cpu_no_such_option_in_any_jaxlib": True})
     assert compiler.options() == ()
     f = compiler.jit(_f, static_argnums=(1,))
