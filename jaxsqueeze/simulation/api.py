@@ -230,9 +230,9 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     """
     concrete = is_concrete(scene)
     if concrete:
-        costs = validate.scene_cost_problems(scene)
-        if costs:
-            raise ValueError("\n".join(costs))
+        bad = validate.shape_problems(scene) or validate.scene_cost_problems(scene)
+        if bad:
+            raise ValueError("\n".join(bad))
     op = scene.operator() if op is None else op
     if concrete and scene.placement is None:
         check_grip(scene, op)

@@ -271,7 +271,8 @@ class Scene:
             raise ValueError("Settings.capacity must be at least 2 (one contact per finger).")
         for name in ("step", "event_tol", "newton_tol", "gap_tol"):
             v = getattr(s, name)
-            if v is not None and numeric(v) and not (np.isfinite(v) and v > 0):
+            a = np.asarray(v, float) if v is not None and numeric(v) else None
+            if a is not None and not np.all(np.isfinite(a) & (a > 0)):
                 raise ValueError(f"Settings.{name}={v!r} must be a finite value > 0 (or None for the default).")
 
     # ------------------------------------------------------------------ object helpers

@@ -429,6 +429,34 @@ def scene_cost_problems(scene, dtype=np.float64, limit: int | None = None) -> li
     return check_costs(len(bnodes), n, method, s.slots(len(bnodes)), s.max_steps, s.max_events, dtype, limit)
 
 
+# ----------------------------------------------------------------------------- shapes
+def shape_problems(scene) -> list[str]:
+    """Eager check that a :class:`~jaxsqueeze.Scene`'s numbers are numbers of the shape one
+    squeeze takes (a scalar each; :class:`~jaxsqueeze.Fingers` checks its rotation itself): one
+    line per field that is not, naming it. An array where a scalar belongs is a batch, for ``jax.vmap``."""
+    s, a = scene.settings, scene.adversary
+    fields = {"material.E": scene.material.E, "material.nu": getattr(scene.material, "nu", None),
+              "material.thickness": scene.material.thickness, "fingers.radius": scene.fingers.radius,
+              "friction": scene.friction, "depth": scene.depth, "settings.step": s.step,
+              "settings.event_tol": s.event_tol, "settings.newton_tol": s.newton_tol, "settings.gap_tol": s.gap_tol}
+    if a is not None:
+        fields.update({"adversary.s": a.s, "adversary.push": a.push, "adversary.angle": a.angle,
+                       "adversary.radius": a.radius, "adversary.step": a.step})
+    out = []
+    for name, value in fields.items():
+        if value is None:
+            continue
+        try:
+            x = np.asarray(value, float)
+        except (TypeError, ValueError):
+            out.append(f"{name} = {value!r}: expected a number")
+            continue
+        if x.ndim:
+            out.append(f"{name} has shape {x.shape}: one squeeze takes a single number; for many values use "
+                       "jax.vmap over the scene")
+    return out
+
+
 # ----------------------------------------------------------------------------- mixed units
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> tuple[list[str], list[str]]:
     """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.
@@ -462,4 +490,4 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
 
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "invalid_index", "problems",
            "raise_if_invalid", "fingertip_overlap", "values_of", "check_scene", "history_bytes",
-           "compliance_bytes", "check_costs", "scene_cost_problems", "unit_problems"]
+           "compliance_bytes", "check_costs", "scene_cost_problems", "shape_problems", "unit_problems"]

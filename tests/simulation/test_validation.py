@@ -136,6 +136,22 @@ def test_scene_values_eager_and_batched(square):
     assert int(g(jnp.array(sc.grip))) == -1
 
 
+@pytest.mark.parametrize("change,field", [
+    (dict(friction=[0.2, 0.3]), "friction has shape \\(2,\\)"),
+    (dict(depth=[0.01]), "depth has shape \\(1,\\)"),
+    (dict(depth="deep"), "depth = 'deep': expected a number"),
+    (dict(material=jsq.Material(E=np.array([1e5, 2e5]), nu=0.3, thickness=0.0254)), "material.E has shape"),
+    (dict(fingers=jsq.Fingers(radius=[0.01])), "fingers.radius has shape"),
+    (dict(settings=jsq.Settings(step=[1e-3])), "settings.step has shape"),
+    (dict(adversary=jsq.Adversary(s=[0.1, 0.2], push=1e-3)), "adversary.s has shape"),
+])
+def test_an_eager_squeeze_refuses_an_array_where_a_number_belongs(square, change, field):
+    """One squeeze takes one number per field (a batch is for vmap): the error names the field
+    (an array friction reached float() in the cone test, an array depth a lax.switch type error)."""
+    with pytest.raises(ValueError, match=field):
+        jsq.squeeze(_scene(square, **change))
+
+
 def test_fingertip_overlapping_a_reentrant_vertex_is_refused():
     # a five-pointed star gripped at a re-entrant vertex: the fingertip overlaps the two
     # neighbouring arms at first touch
