@@ -6,7 +6,8 @@ lowers ``api._run``, compiles it, then times the compiled squeeze (best of ``--r
 
 * ``plain``: ``jax.jit`` with XLA's defaults of the program an eager squeeze runs;
 * ``library``: the top-level program an eager ``jsq.squeeze`` compiles
-  (``jaxsqueeze.compiler.options()``; 32 contact slots and one 8-contact Newton system);
+  (``jaxsqueeze.compiler.options()``: fusion emitters off, LLVM level 1; 32 contact slots and
+  one 8-contact Newton system);
 * ``XLA_FLAGS=...``: the plain program under one process-wide XLA flag each;
 * ``traced defaults``: the program's shape a squeeze inside ``jit``/``vmap`` gets (64 slots,
   the 16-contact Newton system and the all-slot fallback), and the same with the all-slot
@@ -32,6 +33,7 @@ VARIANTS = [  # (label, XLA_FLAGS, worker arguments)
     ("library (compiler.options)", "", ["library"]),
     ("XLA_FLAGS fusion emitters off", "--xla_cpu_use_fusion_emitters=false", ["plain"]),
     ("XLA_FLAGS backend opt level 0", "--xla_backend_optimization_level=0", ["plain"]),
+    ("XLA_FLAGS backend opt level 1", "--xla_backend_optimization_level=1", ["plain"]),
     ("XLA_FLAGS llvm expensive passes off", "--xla_llvm_disable_expensive_passes=true", ["plain"]),
     ("XLA_FLAGS codegen split 1", "--xla_cpu_parallel_codegen_split_count=1", ["plain"]),
     ("library, traced defaults (64 slots, both Newton systems)", "", ["library", "traced"]),
