@@ -10,6 +10,24 @@ def is_concrete(x) -> bool:
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(x))
 
 
+def reverse_mode(x) -> bool:
+    """True if any leaf of ``x`` is being differentiated in reverse mode (``jax.grad``,
+    ``jax.vjp``, ``jax.jacrev``, ``jax.linearize``), also through ``vmap``/``jit`` tracers
+    around it. Read from the tracers' class names (``LinearizeTracer``; a ``JVPTracer`` whose
+    tangent is being staged out in older JAX), so a JAX that renames them only loses the
+    clearer error, never a result."""
+    def rev(t, depth=0) -> bool:
+        if not isinstance(t, jax.core.Tracer) or depth > 8:
+            return False
+        name = type(t).__name__
+        if name == "LinearizeTracer":
+            return True
+        if name == "JVPTracer" and type(getattr(t, "tangent", None)).__name__ == "JaxprTracer":
+            return True
+        return any(rev(getattr(t, a, None), depth + 1) for a in ("val", "primal"))
+    return any(rev(v) for v in jax.tree.leaves(x))
+
+
 def numeric(x) -> bool:
     """True for a concrete number or array of numbers (what eager validation can check).
 

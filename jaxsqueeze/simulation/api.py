@@ -17,7 +17,7 @@ from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..tracing import is_concrete
+from ..tracing import is_concrete, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
 from .scene import Scene
@@ -195,6 +195,13 @@ def _grown(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Con
     return dataclasses.replace(cfg, capacity=capacity, sliding=slide)
 
 
+REVERSE_MODE = (
+    "jsq.squeeze is differentiable in forward mode only (jax.jvp, jax.jacfwd): it is a lax.while_loop over a "
+    "data-dependent number of steps, which JAX cannot differentiate in reverse (jax.grad, jax.vjp, jax.jacrev, "
+    "jax.linearize, jax.hessian). For the gradient of a number in a few inputs use jax.jacfwd (one forward pass "
+    "per input), e.g. jax.jacfwd(loss)(params) in place of jax.grad(loss)(params).")
+
+
 @compiler.jit(static_argnames=("cfg",))
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
@@ -228,6 +235,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     Eagerly, invalid input raises ``ValueError`` naming every bad field; under tracing it
     gives ``Status.INVALID_INPUT`` with ``result.invalid`` naming the field.
     """
+    if reverse_mode((scene, op)):
+        raise TypeError(REVERSE_MODE)
     concrete = is_concrete(scene)
     if concrete:
         bad = validate.shape_problems(scene) or validate.scene_cost_problems(scene)

@@ -337,6 +337,19 @@ def test_jacfwd_in_every_number_matches_central_differences(slanted):
         np.testing.assert_allclose(J[k], fd, rtol=1e-5, err_msg=name)
 
 
+def test_reverse_mode_is_refused_with_the_way_to_a_gradient(slanted):
+    """README: jax.grad / vjp / jacrev through a squeeze raise a TypeError that names jax.jacfwd
+    (JAX's own error was "Linearization failed to produce known values"), also under vmap;
+    nothing is compiled on the way."""
+    force = lambda mu: jsq.squeeze(slanted.replace(friction=mu)).grip_force  # noqa: E731
+    attempts = [lambda: jax.grad(force)(0.3), lambda: jax.vjp(force, 0.3), lambda: jax.jacrev(force)(0.3),
+                lambda: jax.vmap(jax.grad(force))(jnp.array([0.3, 0.4])),
+                lambda: jax.grad(lambda r: jsq.squeeze(slanted.replace(fingers=jsq.Fingers(radius=r))).grip_force)(0.015)]
+    for attempt in attempts:
+        with pytest.raises(TypeError, match=r"forward mode only.*jax\.jacfwd"):
+            attempt()
+
+
 def test_eager_and_jitted_squeezes_agree(slanted):
     """An eager squeeze is a top-level program compiled with ``compiler.options()``; inside
     ``jax.jit`` the same squeeze is the plain program. Both give the same history."""
