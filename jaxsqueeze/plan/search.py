@@ -291,6 +291,26 @@ class Search(NamedTuple):
     screened: int = 0
 
 
+def _check_search(optimizer, steps, starts, budget, init) -> None:
+    """ValueError/TypeError for arguments :func:`optimize_placement` cannot use, before any squeeze."""
+    def count(name, v, least):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+            raise ValueError(f"{name}={v!r} must be an integer >= {least}.")
+    count("steps", steps, 0)
+    count("starts", starts, 1)
+    if budget is not None:
+        count("budget", budget, 1)
+    if optimizer is not None and not (hasattr(optimizer, "init") and hasattr(optimizer, "update")):
+        raise TypeError(f"optimizer={optimizer!r} is not an optax optimizer; pass one such as optax.adam(0.02) "
+                        "(or None for that default).")
+    if init is not None:
+        x = np.asarray(init, float)
+        x = x[None] if x.ndim == 1 else x
+        if x.ndim != 2 or x.shape[1] not in (2, 3) or not len(x) or not np.all(np.isfinite(x)):
+            raise ValueError(f"init of shape {np.shape(init)} must be finite (k, 2) or (k, 3) starting candidates "
+                             "(s_0, s_1[, angle]) [m, m, rad].")
+
+
 def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimizer=None, steps: int = 40,
                        starts: int = 5, coarse_spacing=None, vary_angle: bool = False, op=None,
                        progress: bool = True, budget: int | None = None) -> Search:
@@ -315,6 +335,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     """
     import optax
 
+    _check_search(optimizer, steps, starts, budget, init)
     op = scene.operator() if op is None else op
     qfn = quality_of(scene, quality)
     P = float(scene.curve().perimeter)

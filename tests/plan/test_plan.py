@@ -31,7 +31,8 @@ def square():
 def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellipse):
     """A map's spacing must be a finite arc length > 0 and leave at most 10 positions per
     boundary node (a map squeezes every pair); an eager squeeze takes one placement (s of
-    shape (2,), a scalar angle). Each is a ValueError that says so, and nothing compiles."""
+    shape (2,), a scalar angle); a search needs counts, an optax optimizer and finite starting
+    candidates. Each is an error that says so, and nothing compiles."""
     from jaxsqueeze.simulation import api
     before = api._run._cache_size()
     for spacing in (-1.0, 0.0, float("nan")):
@@ -41,6 +42,15 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
         jsq.grasp_map(ellipse, "squeeze_work", spacing=1e-6)
     with pytest.raises(ValueError, match="one placement"):
         jsq.squeeze(ellipse.replace(placement=plan.Placement(s=(0.0, 0.1), angle=(0.1, 0.0))))
+    # a search's counts, optimizer and starting candidates (starts=0 said "no feasible placement
+    # on the coarse map" after squeezing it; steps=-1 ran; a string optimizer failed in optax)
+    for kw, match in [(dict(starts=0), "starts=0 must be an integer >= 1"), (dict(steps=-1), "steps=-1"),
+                      (dict(steps=2.5), "steps=2.5"), (dict(budget=0), "budget=0"),
+                      (dict(init=[[0.0, float("nan")]]), "init of shape"), (dict(init=[[0.0, 0.1, 0.0, 1.0]]), "init")]:
+        with pytest.raises(ValueError, match=match):
+            jsq.optimize_placement(ellipse, "squeeze_work", progress=False, **kw)
+    with pytest.raises(TypeError, match="not an optax optimizer"):
+        jsq.optimize_placement(ellipse, "squeeze_work", optimizer="adam", progress=False)
     assert api._run._cache_size() == before
 
 
