@@ -312,7 +312,9 @@ def plot_events(res) -> Figure:
         else:
             ax.text(0.5, 0.5, "no events", transform=ax.transAxes, ha="center")
     axs[1].set_xlabel("squeeze depth d [mm]")
-    axs[1].set_xlim(0, float(np.asarray(res.depth)[-1]) * MM * 1.02)
+    last = float(np.asarray(res.depth)[-1]) * MM
+    if last > 0:                   # (a squeeze that ended at its first touch has one depth, 0)
+        axs[1].set_xlim(0, last * 1.02)
     seq = "".join(e["kind"] for e in ev)
     counts = ", ".join(f"{k}: {seq.count(k)}" for k in EVENT_LETTERS)
     fig.suptitle(f"Contact events ({len(ev)} in all; {counts})")

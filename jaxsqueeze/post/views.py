@@ -286,7 +286,7 @@ def sliding_profile(res, finger: int = 0) -> SlidingProfile:
     cols = np.flatnonzero(on.any(axis=0))
     th = np.where(on[:, cols], theta[:, cols], np.nan)
     # keep angles continuous across the ±π cut: shift each column toward the first angle
-    if cols.size:
+    if np.isfinite(th).any():      # (an infeasible grip's only row has no angles)
         ref = np.nanmedian(th)
         th = ref + (th - ref + np.pi) % (2 * np.pi) - np.pi
     return SlidingProfile(np.asarray(res.depth, float), relative_depth(res), np.asarray(res.nodes)[cols],

@@ -104,14 +104,14 @@ def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
 def test_a_placement_without_a_squeeze_line_still_plots(ellipse, tmp_path):
     """An eager squeeze of both fingers placed at one point has no squeeze line: INFEASIBLE_GRIP
     with no fingertip positions (NaN centres); the plots still draw the object and say the
-    status instead of failing inside matplotlib."""
+    status instead of failing inside matplotlib or warning."""
     import warnings
 
     missed = ellipse.replace(placement=plan.Placement(s=(0.1, 0.1)))
     res = jsq.squeeze(missed)
     assert res.outcome == jsq.Status.INFEASIBLE_GRIP and not np.all(np.isfinite(res.centres))
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")        # all-NaN rows: numpy and matplotlib warn
+        warnings.simplefilter("error")         # nor warn about the all-NaN row
         paths = jsq.plots.save_all(res, missed, str(tmp_path))
     assert all(os.path.getsize(p) > 0 for p in paths.values())
 
