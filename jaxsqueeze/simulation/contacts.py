@@ -135,18 +135,31 @@ def pair(op: Compliance, S: int, i, j) -> Slots:
 
 def activate(op: Compliance, sl: Slots, k, pos) -> Slots:
     """Slot k (empty) takes boundary position ``pos``: the inverse updated by bordering."""
-    d = _dofs(pos)
-    b = jnp.concatenate([sl.Gc[d].T, op.N[d].T], axis=0)          # (2S + 3, 2)
-    Minv = inverse_activate(sl.Minv, k, b, op.G[d][:, d])
-    Gc = lax.dynamic_update_slice(sl.Gc, op.G[:, d], (0, 2 * k))
-    return Slots(sl.node.at[k].set(jnp.int32(pos)), sl.slot.at[pos].set(jnp.int32(k)), Minv, Gc)
+    return _with_columns(sl, k, *_activated(op, sl, k, pos))
 
 
 def deactivate(sl: Slots, k) -> Slots:
     """Slot k (active) is emptied: the inverse downdated by the Schur complement."""
-    Gc = lax.dynamic_update_slice(sl.Gc, jnp.zeros((sl.Gc.shape[0], 2), sl.Gc.dtype), (0, 2 * k))
+    return _with_columns(sl, k, *_deactivated(sl, k))
+
+
+def _activated(op: Compliance, sl: Slots, k, pos):
+    """(node, slot, Minv, the compliance columns of slot k (2m, 2)) once slot k takes ``pos``."""
+    d = _dofs(pos)
+    b = jnp.concatenate([sl.Gc[d].T, op.N[d].T], axis=0)          # (2S + 3, 2)
+    Minv = inverse_activate(sl.Minv, k, b, op.G[d][:, d])
+    return sl.node.at[k].set(jnp.int32(pos)), sl.slot.at[pos].set(jnp.int32(k)), Minv, op.G[:, d]
+
+
+def _deactivated(sl: Slots, k):
+    """(node, slot, Minv, the compliance columns of slot k (2m, 2)) once slot k is emptied."""
     S = sl.node.shape[0]
-    return Slots(sl.node.at[k].set(-1), sl.slot.at[sl.node[k]].set(S), inverse_deactivate(sl.Minv, k), Gc)
+    return (sl.node.at[k].set(-1), sl.slot.at[sl.node[k]].set(S), inverse_deactivate(sl.Minv, k),
+            jnp.zeros((sl.Gc.shape[0], 2), sl.Gc.dtype))
+
+
+def _with_columns(sl: Slots, k, node, slot, Minv, cols) -> Slots:
+    return Slots(node, slot, Minv, lax.dynamic_update_slice(sl.Gc, cols, (0, 2 * k)))
 
 
 def update(op: Compliance, sl: Slots, old_on, new_on):
@@ -169,27 +182,36 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
 
     def body(c):
         sl, leave, join, over, todo, fresh = c
+        # each stage returns the new (node, slot, Minv), the slot k whose compliance columns
+        # change and their new values; Gc itself (2m × 2S) is written after the switch, in
+        # place: a stage returning it would copy it on every stage
+        same = (sl.node, sl.slot, sl.Minv, jnp.asarray(0, jnp.int_), lax.dynamic_slice_in_dim(sl.Gc, 0, 2, axis=1))
 
         def drop():
             p = jnp.argmax(leave)
-            return deactivate(sl, sl.slot[p].astype(int)), leave.at[p].set(False), join, over, todo, fresh
+            k = sl.slot[p].astype(jnp.int_)
+            node, slot, Minv, cols = _deactivated(sl, k)
+            return (node, slot, Minv, k, cols), leave.at[p].set(False), join, over, todo, fresh
 
         def add():
             p = jnp.argmax(join)
-            return activate(op, sl, jnp.argmax(sl.node < 0), p), leave, join.at[p].set(False), over, todo, fresh
+            k = jnp.argmax(sl.node < 0).astype(jnp.int_)
+            node, slot, Minv, cols = _activated(op, sl, k, p)
+            return (node, slot, Minv, k, cols), leave, join.at[p].set(False), over, todo, fresh
 
         def full():         # no empty slot left for the nodes still joining: they stay out
-            return sl, leave, jnp.zeros_like(join), jnp.array(True), todo, fresh
+            return same, leave, jnp.zeros_like(join), jnp.array(True), todo, fresh
 
         def check():
-            return sl, leave, join, over, jnp.where(drift(op, sl) > tol, 2, 0).astype(jnp.int32), fresh
+            return same, leave, join, over, jnp.where(drift(op, sl) > tol, 2, 0).astype(jnp.int32), fresh
 
         def refresh():
             Minv = linalg.inv(bordered_matrix_of(op, sl))
-            return sl._replace(Minv=Minv), leave, join, over, jnp.array(0, jnp.int32), jnp.array(True)
+            return same[:2] + (Minv,) + same[3:], leave, join, over, jnp.array(0, jnp.int32), jnp.array(True)
 
         stage = jnp.where(jnp.any(leave), 0, jnp.where(jnp.any(join), jnp.where(jnp.any(sl.node < 0), 1, 2), todo + 2))
-        return lax.switch(stage, [drop, add, full, check, refresh])
+        (node, slot, Minv, k, cols), *rest = lax.switch(stage, [drop, add, full, check, refresh])
+        return (_with_columns(sl, k, node, slot, Minv, cols), *rest)
 
     todo = jnp.where(jnp.any(leave | join), 1, 0).astype(jnp.int32)     # 1: check the inverse, 2: recompute it
     sl, _, _, over, _, fresh = lax.while_loop(cond, body, (sl, leave, join, jnp.array(False), todo, jnp.array(False)))
