@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .boundary import crossing, neighbours
+
 
 @dataclass(frozen=True, eq=False)
 class Mesh:
@@ -59,8 +61,9 @@ class Mesh:
         Raises:
             ValueError: on bad shapes, non-finite coordinates, out-of-range indices,
                 degenerate or inverted triangles, duplicate nodes, hanging nodes
-                (T-junctions), non-manifold edges or vertices, or a mesh in more than one piece. Messages use the caller's
-                node and triangle indices.
+                (T-junctions), non-manifold edges or vertices, a mesh in more than one piece, or
+                a boundary that crosses itself (a mesh that overlaps itself). Messages use the
+                caller's node and triangle indices.
         """
         pts, tri = _check_arrays(points, triangles)
         used = np.unique(tri)  # original index of each kept node
@@ -75,6 +78,7 @@ class Mesh:
         pts = pts - offset
         loops = _chain_loops(pts, bnext)
         boundary = np.concatenate(loops)
+        _check_crossing(pts, boundary, loops, used)
         normals = np.concatenate([_loop_normals(pts[lp]) for lp in loops])
         arrays = [pts, tri.astype(np.int64), boundary.astype(np.int64), normals, offset]
         for a in arrays:
@@ -165,6 +169,18 @@ def _orient(pts, tri, used):
                          f"their orientation is opposite to the rest of the mesh (folded elements); "
                          "reorder their nodes or fix the node positions")
     return tri if sign > 0 else tri[:, [0, 2, 1]]
+
+
+def _check_crossing(pts, boundary, loops, used):
+    """Reject a boundary that crosses itself: consistently oriented triangles that overlap (a
+    strip wound past a full turn, a fold whose triangles all keep their orientation)."""
+    sizes = tuple(len(lp) for lp in loops)
+    hit = crossing(pts[boundary], sizes)
+    if hit is not None:
+        _, nxt = neighbours(sizes, len(boundary))
+        a, b = (used[boundary[[k, nxt[k]]]].tolist() for k in hit)
+        raise ValueError(f"the boundary crosses itself: edge {a} crosses edge {b} (caller's node indices), so the "
+                         "mesh overlaps itself; remesh the object so that no two triangles overlap")
 
 
 def _check_duplicates(pts, used):

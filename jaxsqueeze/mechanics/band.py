@@ -64,6 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from ..geometry.boundary import crossing
 from ..geometry.curves import arclength_params
 from .operator import Compliance, FieldMap, rigid_modes
 
@@ -191,6 +192,11 @@ class Band:
         if not (width > 0 and height > 0):
             raise ValueError(f"band width and height must be > 0 m, got {width!r}, {height!r}")
         x, y = xy[:, 0], xy[:, 1]
+        hit = crossing(xy, (len(xy),))
+        if hit is not None:
+            a, b = ([k, (k + 1) % len(xy)] for k in hit)
+            raise ValueError(f"the band curve crosses itself: segment {a} crosses segment {b} (point indices); "
+                             "order the points along the curve")
         if 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) <= 0:
             raise ValueError("the band curve must run counterclockwise (positive signed area)")
         cs, u, period = _spline(xy)

@@ -118,6 +118,19 @@ def test_overlapping_triangles_on_same_side():
         Mesh.from_arrays(pts, np.array([[0, 1, 2], [0, 1, 3]]))
 
 
+def test_a_mesh_that_overlaps_itself_with_every_triangle_counterclockwise():
+    """A strip wound 1.25 turns: every triangle counterclockwise and manifold, but the strip
+    covers part of the plane twice, so its boundary crosses itself."""
+    n = 50
+    th = np.linspace(0, 2.5 * np.pi, n)
+    ring = np.stack([np.cos(th), np.sin(th)], 1)
+    pts = np.vstack([0.03 * ring, 0.05 * ring * (1 + 0.3 * th[:, None] / th[-1])])
+    tri = np.array([t for k in range(n - 1) for t in ([k, k + 1, n + k + 1], [k, n + k + 1, n + k])])
+    with pytest.raises(ValueError, match=r"boundary crosses itself: edge \[\d+, \d+\] crosses edge"):
+        Mesh.from_arrays(pts, tri)
+    Mesh.from_arrays(pts, tri[: 2 * (n // 2)])                 # less than a turn: a valid mesh
+
+
 def test_bow_tie_vertex():
     # Two squares meeting at one corner, joined by a strip so the triangles are edge-connected.
     pts, tri = grid(3, 3)

@@ -156,5 +156,9 @@ def test_curves():
     assert curves.heart()(np.array([0.0])).shape == (1, 2)
     with pytest.raises(ValueError):
         Band.from_curve(curves.sample(curves.circle(0.04), 32)[::-1])
+    twisted = curves.sample(curves.circle(0.04), 32)
+    twisted[[10, 11]] = twisted[[11, 10]]                      # two points out of order
+    with pytest.raises(ValueError, match=r"crosses itself: segment \[9, 10\] crosses segment \[11, 12\]"):
+        Band.from_curve(twisted)
     with pytest.raises(ValueError):
         curves.leaf(0.08, 0.04, tip=0.03)
