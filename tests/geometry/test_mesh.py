@@ -131,6 +131,20 @@ def test_a_mesh_that_overlaps_itself_with_every_triangle_counterclockwise():
     Mesh.from_arrays(pts, tri[: 2 * (n // 2)])                 # less than a turn: a valid mesh
 
 
+def test_boundary_crossing_counts_proper_crossings_only():
+    """geometry.boundary.crossing: a vertex resting on another edge or two loops that share an
+    edge line are not crossings; an edge through another is, reported by edge positions."""
+    from jaxsqueeze.geometry.boundary import crossing
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1.0]])
+    assert crossing(square, (4,)) is None
+    touching = np.array([[0, 0], [2, 0], [2, 1], [1, 0], [0, 1.0]])       # vertex 3 rests on edge 0
+    assert crossing(touching, (5,)) is None
+    hole_on_edge = np.vstack([square, [[0.2, 0.0], [0.2, 0.5], [0.6, 0.5], [0.6, 0.0]]])  # collinear edges
+    assert crossing(hole_on_edge, (4, 4)) is None
+    through = np.vstack([square, [[0.5, -0.5], [0.5, 0.5], [0.8, 0.5], [0.8, -0.5]]])
+    assert crossing(through, (4, 4)) == (0, 4)
+
+
 def test_bow_tie_vertex():
     # Two squares meeting at one corner, joined by a strip so the triangles are edge-connected.
     pts, tri = grid(3, 3)
