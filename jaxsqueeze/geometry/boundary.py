@@ -54,7 +54,7 @@ def crossing(x, loops, chunk: int = 256):
     _, nxt = neighbours(loops, x.shape[0])
     a, b = x, x[nxt]
     k = np.arange(len(x))
-    scale = np.abs(x).max() if len(x) else 1.0
+    scale = np.ptp(x, axis=0).max() if len(x) else 1.0          # the extent, not the distance from 0
 
     def side(p, q, r):         # twice the signed area of (p, q, r), broadcast
         return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])

@@ -245,12 +245,6 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     op = scene.operator() if op is None else op
     if concrete and scene.placement is None:
         check_grip(scene, op)
-    if concrete and scene.placement is not None:
-        shapes = np.shape(scene.placement.s), np.shape(scene.placement.angle)
-        if shapes != ((2,), ()):
-            raise ValueError(f"an eager squeeze takes one placement: Placement.s of shape (2,) and a scalar angle "
-                             f"[rad], got shapes {shapes[0]} and {shapes[1]}; for many placements use jax.vmap "
-                             "(or jsq.grasp_map).")
     cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)
     grasp = grasp_of(scene, op, validated=concrete)
     if concrete:

@@ -432,10 +432,11 @@ def scene_cost_problems(scene, dtype=np.float64, limit: int | None = None) -> li
 # ----------------------------------------------------------------------------- shapes
 def shape_problems(scene) -> list[str]:
     """Eager check that a :class:`~jaxsqueeze.Scene`'s numbers are numbers of the shape one
-    squeeze takes (a scalar each; :class:`~jaxsqueeze.Fingers` checks its rotation itself): one
-    line per field that is not, naming it. An array where a scalar belongs is a batch, for ``jax.vmap``."""
+    squeeze takes (a scalar each, a placement of shape (2,) and a scalar angle;
+    :class:`~jaxsqueeze.Fingers` checks its rotation itself): one line per field that is not,
+    naming it. An array where a scalar belongs is a batch, for ``jax.vmap``."""
     s, a = scene.settings, scene.adversary
-    fields = {"material.E": scene.material.E, "material.nu": getattr(scene.material, "nu", None),
+    fields = {"material.E": scene.material.E, "material.nu": scene.material.nu,
               "material.thickness": scene.material.thickness, "fingers.radius": scene.fingers.radius,
               "friction": scene.friction, "depth": scene.depth, "settings.step": s.step,
               "settings.event_tol": s.event_tol, "settings.newton_tol": s.newton_tol, "settings.gap_tol": s.gap_tol}
@@ -454,6 +455,11 @@ def shape_problems(scene) -> list[str]:
         if x.ndim:
             out.append(f"{name} has shape {x.shape}: one squeeze takes a single number; for many values use "
                        "jax.vmap over the scene")
+    if scene.placement is not None:
+        shapes = np.shape(scene.placement.s), np.shape(scene.placement.angle)
+        if shapes != ((2,), ()):
+            out.append(f"an eager squeeze takes one placement: Placement.s of shape (2,) and a scalar angle [rad], "
+                       f"got shapes {shapes[0]} and {shapes[1]}; for many placements use jax.vmap (or jsq.grasp_map)")
     return out
 
 
