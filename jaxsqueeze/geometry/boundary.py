@@ -42,6 +42,19 @@ def normals(x, loops, xp=jnp):
     return xp.where(norm > 1e-12, s / xp.maximum(norm, 1e-300), n)
 
 
+def inside(x, loops, q, xp=jnp):
+    """(k,) bool: which points ``q`` (k, 2) lie inside the object bounded by the loops of ``x``
+    (m, 2): inside the outer loop and outside every hole (the even-odd rule: a ray from the
+    point crosses the boundary an odd number of times). For a band, inside its curve."""
+    _, nxt = neighbours(loops, x.shape[0])
+    a, b = x[None, :, :], x[nxt][None, :, :]
+    q = q[:, None, :]
+    straddles = (a[..., 1] > q[..., 1]) != (b[..., 1] > q[..., 1])
+    dy = xp.where(straddles, b[..., 1] - a[..., 1], 1.0)
+    x_cross = a[..., 0] + (q[..., 1] - a[..., 1]) * (b[..., 0] - a[..., 0]) / dy
+    return xp.sum(straddles & (q[..., 0] < x_cross), axis=1) % 2 == 1
+
+
 def crossing(x, loops, chunk: int = 256):
     """The first pair of boundary edges that cross each other, as positions (a, b) of their
     first nodes (edge k runs from position k to the next one along its loop), or ``None``.

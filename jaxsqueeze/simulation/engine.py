@@ -48,7 +48,11 @@ from .status import Status
 
 RUNNING = -1
 ADVANCE, LOCATE, CHECK, PRIME = 0, 1, 2, 3
-SETTLE_ITERS = 6   # CHECK passes that may change a frictionless contact set at one depth
+SETTLE_ITERS = 6   # CHECK passes that may change a contact set at one depth (settle, peel)
+#: a contact pulling by more than this fraction of the largest contact force in a CHECK solve
+#: lets go at that depth (float64, float32): below it the pull is round-off, or a B event of its
+#: own within ``event_tol`` that the next bracket resolves
+PEEL_SHARE = (1e-8, 1e-3)
 #: frictionless rows are accepted while the drift rule's tangential forces, and any pull, stay
 #: below this fraction of the row's largest contact force (docs/numerics.md §5.1); beyond it the
 #: object would slide away along its drift and the squeeze stops with STALLED
@@ -241,8 +245,12 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
         big = DRIFT_SHARE * jnp.maximum(jnp.max(jnp.abs(sol.F)), floor)
         off = jnp.any(on & ((jnp.abs(sol.ft) > big) | (sol.fn < -big)))
         fault = jnp.where(off & (fault == RUNNING), Status.STALLED, fault).astype(jnp.int32)
-    st = _with(st, d=d, nodes=st.nodes._replace(theta=angle, armed=armed), angle=angle, F=sol.F, u=sol.u,
-               g=sol.g, e=sol.e, de=dsol.e, stats=stats, phase=jnp.array(ADVANCE, jnp.int32), fault=fault)
+    # a grip that cannot start (invalid input, infeasible grip) records its touch unloaded: the
+    # solve of a placed finger that touches nothing means nothing, and may not even be finite
+    start = (st.fault != Status.INVALID_INPUT) & (st.fault != Status.INFEASIBLE_GRIP)
+    F, u, g = (jnp.where(start, a, 0.0) for a in (sol.F, sol.u, sol.g))
+    st = _with(st, d=d, nodes=st.nodes._replace(theta=angle, armed=armed), angle=angle, F=F, u=u,
+               g=g, e=sol.e, de=dsol.e, stats=stats, phase=jnp.array(ADVANCE, jnp.int32), fault=fault)
     return finish(model, st, sol.ok)
 
 
@@ -370,7 +378,6 @@ def apply_event(model: Model, st: State) -> State:
     bring the state to d* (slip angles extrapolated from hi with their rate), apply every event
     flagged at hi, log the events and go to CHECK at d* (:func:`reconcile` then updates the
     contact slots)."""
-    op, E = model.op, model.cfg.max_events
     b = st.bracket
     flag = b.e_hi < 0
     est = jnp.where(flag & (b.de_hi < 0), _newton_from_hi(b), b.hi)
@@ -392,27 +399,40 @@ def apply_event(model: Model, st: State) -> State:
     mode = jnp.where(flag & (kinds == 3), STICK, mode)                         # D: stick where it is
     mode = mode.astype(jnp.int32)
     overflow = jnp.sum(mode > FREE) > model.cfg.capacity
-    order = jnp.cumsum(flag) - 1 + st.n_ev
-    slot = jnp.where(flag & (order < E), order, E)
-    ev_d, ev_n, ev_k, ev_f = st.events
-    events = (ev_d.at[slot].set(d_star, mode="drop"), ev_n.at[slot].set(op.nodes.astype(jnp.int32), mode="drop"),
-              ev_k.at[slot].set(kinds.astype(jnp.int32), mode="drop"), ev_f.at[slot].set(finger, mode="drop"))
-    n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
+    events, n_ev, fault = _log(model, st, flag, kinds, finger, d_star)
     changed = mode != ns.mode
     nodes = Nodes(mode, finger.astype(jnp.int32), theta, ns.armed & ~changed)
-    fault = jnp.where(overflow, Status.OVERFLOW, jnp.where(n_ev > E, Status.EVENT_OVERFLOW, st.fault))
+    fault = jnp.where(overflow, Status.OVERFLOW, fault)
     return _with(st, nodes=nodes, events=events, n_ev=n_ev, phase=jnp.array(CHECK, jnp.int32),
                  d_star=d_star, added=added & (mode > FREE), checks=jnp.array(0, jnp.int32), before=ns.mode,
                  fault=fault.astype(jnp.int32))
 
 
+def _log(model: Model, st: State, flag, kinds, finger, d):
+    """The event log with the events of the nodes ``flag`` (m,) appended (kinds and fingers
+    (m,), all at depth d), their count, and the fault (EVENT_OVERFLOW past ``max_events``)."""
+    E = model.cfg.max_events
+    order = jnp.cumsum(flag) - 1 + st.n_ev
+    slot = jnp.where(flag & (order < E), order, E)
+    ev_d, ev_n, ev_k, ev_f = st.events
+    events = (ev_d.at[slot].set(d, mode="drop"), ev_n.at[slot].set(model.op.nodes.astype(jnp.int32), mode="drop"),
+              ev_k.at[slot].set(kinds.astype(jnp.int32), mode="drop"),
+              ev_f.at[slot].set(finger.astype(jnp.int32), mode="drop"))
+    n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
+    return events, n_ev, jnp.where(n_ev > E, Status.EVENT_OVERFLOW, st.fault).astype(jnp.int32)
+
+
 def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     """The contact set just past d*, judged from the solve at d* and its rate (the probe
-    d* + η to first order). Returns (mode, finger, theta, changed, unsettled).
+    d* + η to first order). Returns (mode, finger, theta, changed, unsettled, peeled).
 
-    Coulomb and full stick (first pass only): a new contact that would pull at the probe is
+    Coulomb and full stick: on the first pass a new contact that would pull at the probe is
     dropped (in float32: whose force's rate is not positive, as its value is round-off); under
-    Coulomb, one whose force leaves its cone slides against its tangential force.
+    Coulomb, one whose force leaves its cone slides against its tangential force. On every pass
+    an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
+    release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
+    event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
+    contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row).
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
@@ -430,7 +450,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         finger = jnp.where(inside, near, ns.finger).astype(jnp.int32)
         theta = jnp.where(inside, ang, ns.theta)
         changed = jnp.any(inside | drop)
-        return mode, finger, theta, changed, changed & (st.checks + 1 >= SETTLE_ITERS)
+        return mode, finger, theta, changed, changed & (st.checks + 1 >= SETTLE_ITERS), jnp.zeros_like(inside)
     test = st.added & (st.checks == 0)
     # at d* a contact just made carries almost no force. In float32 that value is round-off
     # (the foam square's node 89 chattered in and out at 12.0 mm until STALLED), so the sign
@@ -440,8 +460,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     if model.cfg.slip_events:
         out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
         mode = jnp.where(out, jnp.where(ft < 0, SLIP_POS, SLIP_NEG), mode)
-    mode = mode.astype(jnp.int32)
-    return mode, ns.finger, ns.theta, jnp.any(mode != ns.mode), jnp.array(False)
+    on = (ns.mode > FREE) & ~test
+    share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
+    held, _ = _per_finger(model, ns.mode, ns.finger)
+    peeled = on & (sol.fn < -share * jnp.max(jnp.abs(sol.F))) & (st.checks < SETTLE_ITERS) & jnp.all(held > 0)
+    mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
+    return mode, ns.finger, ns.theta, jnp.any(mode != ns.mode), jnp.array(False), peeled
 
 
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
@@ -449,14 +473,15 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     it, update the slots and solve again at d*; else accept the row (and stop with STALLED
     when the event undid itself at the depth it started from: it would repeat forever).
     Returns (state, accept)."""
-    mode, finger, theta, changed, unsettled = _hypothesis(model, st, sol, dsol)
-    again = changed & ~unsettled
+    mode, finger, theta, changed, unsettled, peeled = _hypothesis(model, st, sol, dsol)
+    again = changed & ~unsettled & (st.fault == RUNNING)      # a faulted run stops at this row
 
     def retry():
         ns = st.nodes
         nodes = Nodes(mode, finger, theta, ns.armed & (mode == ns.mode))
         added = (st.added | (ns.mode == FREE)) & (mode > FREE)
-        return _with(st, nodes=nodes, added=added, checks=st.checks + 1)
+        events, n_ev, fault = _log(model, st, peeled, jnp.ones_like(mode), ns.finger, d_star)
+        return _with(st, nodes=nodes, added=added, checks=st.checks + 1, events=events, n_ev=n_ev, fault=fault)
 
     stalled = (jnp.all(st.nodes.mode == st.before) & (d_star <= st.d)) | unsettled
     fault = jnp.where(stalled & (st.fault == RUNNING), Status.STALLED, st.fault).astype(jnp.int32)

@@ -186,7 +186,12 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
         touches = jnp.isfinite(t0) & jnp.isfinite(t1) & (k0 != k1)
         t0, t1 = jnp.where(touches, t0, 0.0), jnp.where(touches, t1, 0.0)
         o = jnp.stack([o[0] - t0 * e, o[1] + t1 * e])
-        grip = jnp.stack([k0, k1])
+        # a fingertip narrower than the node spacing can slip between two nodes and first
+        # touch a node from inside the object: no grip (and never a SUCCESS through the object)
+        touches = touches & ~jnp.any(boundary.inside(op.points, op.loops, o))
+        # a placement that touches nothing still gets two distinct nodes, so that the first
+        # solve (reported as INFEASIBLE_GRIP) stays finite
+        grip = jnp.stack([k0, jnp.where(k1 == k0, (k0 + 1) % op.m, k1)])
     else:
         grip = jnp.clip(grasp.grip, 0, op.m - 1)      # an invalid grip is reported, never silently used
         o = op.points[grip] + r[:2, None] * op.normals[grip]
@@ -196,8 +201,14 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
     if cfg.friction_model == "frictionless":
         e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
         o = p + r[:2, None] * jnp.stack([e, -e])
-    # smooth feasibility margin (Section I-A), −π when a placed finger cannot touch the object
-    margin = jnp.where(touches, laws.grip_margin(p, -op.normals[grip], mu, cfg.friction_model), -jnp.pi)
+    # smooth feasibility margin (Section I-A), −π when a placed finger cannot touch the object.
+    # The cone is the fingertip's: around its normal at the contact, from the centre to the node
+    # (the object's normal there for an integer grip, whose fingertip sits along it; not for a
+    # placed fingertip, which closes in along the squeeze line and may touch a node obliquely)
+    inward = -op.normals[grip]
+    if cfg.placement and cfg.friction_model != "frictionless":
+        inward = (p - o) / jnp.linalg.norm(p - o, axis=1, keepdims=True)
+    margin = jnp.where(touches, laws.grip_margin(p, inward, mu, cfg.friction_model), -jnp.pi)
     base = jnp.zeros((F, 2), dt).at[:2].set(o)
     dirn = jnp.zeros((F, 2), dt).at[1].set(e)
     present = jnp.arange(F) < 2

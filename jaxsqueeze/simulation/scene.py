@@ -204,7 +204,9 @@ class Scene:
         friction_model: "coulomb" (stick/slip, events A–D), "frictionless" (every contact
             slides, no C/D events) or "stick" (full stick: no Newton solve, no slip events).
         contact: "segment" (contact regions grow: event A) or "point" (one contact per
-            finger, no event A; for ring-like objects, Section V-A).
+            finger, no event A; for ring-like objects, Section V-A: nothing keeps other nodes
+            out of the fingertips, so on a solid object the neighbours of a contact sink into
+            them as it deforms).
         method: compliance build ("sparse", "dense", "spectral"); ignored for bands.
         settings: :class:`Settings`.
         placement: a continuous :class:`Placement` (takes the place of ``grip``).

@@ -351,6 +351,29 @@ def test_event_exactly_at_the_target_depth(base):
     np.testing.assert_allclose(f2(res), f2(base, k), rtol=1e-6, atol=1e-12 * np.abs(f2(base)).max())
 
 
+def test_a_finger_peeling_off_releases_its_contacts_at_one_depth():
+    """Full stick on a slender bar (auxetic, soft): at 9.57 mm finger 1's contact 22 lets go
+    (event B) and the release pulls on its neighbour 23, which lets go at the same depth (a B
+    event of the same row) instead of being recorded pulling with 30 % of the largest force, as
+    it was. Every row holds the invariants until the one in which finger 1 is empty, and the
+    squeeze ends there, LOST_CONTACT (that row is finger 0's contacts alone: a body held by one
+    finger, whatever its sticking contacts carry, is no grasp)."""
+    import dataclasses
+    mesh = jsq.shapes.rectangle(0.03, 0.12, max_edge=0.007)
+    sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=5101.2, nu=-0.14547, thickness=0.012386),
+                   fingers=jsq.Fingers(radius=0.014735), grip=(2, 22), friction=0.5489, depth=0.0124,
+                   friction_model="stick")
+    res = jsq.squeeze(sc)
+    assert res.status == jsq.Status.LOST_CONTACT
+    check_states(dataclasses.replace(res, count=res.count - 1), mesh, 0.5489, "stick")
+    at_end = [(node, kind, finger) for depth, node, kind, finger in res.events.rows()
+              if depth == pytest.approx(res.final_depth, abs=1e-12)]
+    assert at_end == [(22, "B", 1), (23, "B", 1)]
+    final = np.asarray(res.modes[-1]) > 0
+    assert final.sum() == 2 and not np.any(final & (np.asarray(res.finger[-1]) == 1))
+    assert res.depth[-2] < res.final_depth and np.all(np.isfinite(res.forces))     # one row for both releases
+
+
 def test_step_bound_returns_max_steps():
     res = squeeze_ok(base_scene(settings=jsq.Settings(max_steps=3)), (jsq.Status.MAX_STEPS,))
     assert res.final_depth < 0.012 and int(res.count) == 4
