@@ -66,12 +66,17 @@ def hlo_stats(text: str) -> dict:
                 hlo_computations=len(re.findall(r"^(?:ENTRY )?%?\S+ .*\{\s*$", text, re.M)))
 
 
-SCOPES = [  # (label, regex on op_name), first match wins
-    ("squeeze loop / step: advance (accept or open a bracket)", r"squeeze/while/body/.*branch_0_fun"),
-    ("squeeze loop / step: locate_event + apply_event", r"squeeze/while/body/.*branch_1_fun"),
-    ("squeeze loop / step: check (hypothesis, settle)", r"squeeze/while/body/.*branch_2_fun"),
-    ("squeeze loop / step: prime", r"squeeze/while/body/.*branch_3_fun"),
-    ("squeeze loop / step: the one solve and its jvp, accept, finish, reconcile", r"squeeze/"),
+SCOPES = [  # (label, regex on op_name), first match wins: the named scopes of engine.step
+    ("squeeze loop: the one solve and its jvp", r"squeeze/while/body/solve/"),
+    ("squeeze loop: phase advance (accept or open a bracket)", r"squeeze/while/body/phase/cond/branch_0_fun"),
+    ("squeeze loop: phase locate_event + apply_event", r"squeeze/while/body/phase/cond/branch_1_fun"),
+    ("squeeze loop: phase check (hypothesis, settle)", r"squeeze/while/body/phase/cond/branch_2_fun"),
+    ("squeeze loop: phase prime", r"squeeze/while/body/phase/cond/branch_3_fun"),
+    ("squeeze loop: the phase switch itself", r"squeeze/while/body/phase/"),
+    ("squeeze loop: target (the next depth, the event estimate)", r"squeeze/while/body/target/"),
+    ("squeeze loop: accept (record the row, status)", r"squeeze/while/body/accept/"),
+    ("squeeze loop: reconcile (bordering updates of the slots)", r"squeeze/while/body/reconcile/"),
+    ("squeeze loop: other", r"squeeze/"),
     ("init (first touch)", r"init/"),
     ("other (to_result, make_model)", r""),
 ]
