@@ -28,7 +28,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ..simulation.laws import FREE, cone_margin
-from ..simulation.result import SqueezeResult
+from ..simulation.result import SqueezeResult, norm
 
 
 def _rows(res: SqueezeResult):
@@ -53,7 +53,7 @@ def squeeze_work(res: SqueezeResult):
 
 def grip_force(res: SqueezeResult):
     """() magnitude of the still finger's total force at the last squeeze row [N]."""
-    return jnp.linalg.norm(jnp.asarray(res.finger_forces)[_squeeze_row(res), 0])
+    return norm(jnp.asarray(res.finger_forces)[_squeeze_row(res), 0])
 
 
 def _softmax(x, mask, tau):
@@ -74,11 +74,11 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01):
     axis = jnp.stack([jnp.cos(ang), jnp.sin(ang)], -1)
     fn = jnp.sum(F * axis, -1)
     ft = axis[:, 0] * F[:, 1] - axis[:, 1] * F[:, 0]
-    norm = jnp.sqrt(fn ** 2 + ft ** 2)
-    m = cone_margin(jnp.arctan(jnp.asarray(friction, F.dtype)), fn, ft) / jnp.where(norm > 0, norm, 1.0)
+    size = norm(jnp.stack([fn, ft], -1))
+    m = cone_margin(jnp.arctan(jnp.asarray(friction, F.dtype)), fn, ft) / jnp.where(size > 0, size, 1.0)
     per = []
     for f in (0, 1):
-        on = (mode > FREE) & (fg == f) & (norm > 0)
+        on = (mode > FREE) & (fg == f) & (size > 0)
         per.append(jnp.where(jnp.any(on), _softmax(m, on, tau), -1.0))
     per = jnp.stack(per)
     return -_softmax(-per, jnp.ones(2, bool), tau)

@@ -53,9 +53,11 @@ def grip_cone_angles(p, inward, xp=jnp):
         most the friction angle φ (+ ``CONE_SLACK``). ``xp`` is ``jnp`` (traced) or ``np``.
     """
     seg = p[..., 1, :] - p[..., 0, :]
-    seg = seg / xp.linalg.norm(seg, axis=-1, keepdims=True)
-    c = xp.stack([xp.sum(inward[..., 0, :] * seg, -1), -xp.sum(inward[..., 1, :] * seg, -1)], -1)
-    return xp.arccos(xp.clip(c, -1.0, 1.0))
+
+    def angle(n, v):    # atan2(|n × v|, n · v): exact near 0, and its derivative is finite there
+        return xp.arctan2(xp.abs(n[..., 0] * v[..., 1] - n[..., 1] * v[..., 0]), xp.sum(n * v, -1))
+
+    return xp.stack([angle(inward[..., 0, :], seg), angle(inward[..., 1, :], -seg)], -1)
 
 
 def grip_half_angle(mu, friction_model: str, xp=jnp):

@@ -15,6 +15,14 @@ from .laws import EVENT_KINDS
 from .status import Status
 
 
+def norm(v, xp=jnp):
+    """|v| over the last axis, with derivative 0 (not NaN) at v = 0: a grip that never started
+    (forces 0) must not poison a gradient step of a placement search."""
+    s = xp.sum(v * v, axis=-1)
+    pos = s > 0
+    return xp.where(pos, xp.sqrt(xp.where(pos, s, 1.0)), 0.0)
+
+
 class EventLog(NamedTuple):
     """Contact events in the order they happened.
 
@@ -163,7 +171,7 @@ class SqueezeResult:
     @property
     def grip_force(self):
         """() magnitude of the total force of the still finger at the final row [N]."""
-        return self._xp.linalg.norm(self._last(self.total_force)[..., 0, :], axis=-1)
+        return norm(self._last(self.total_force)[..., 0, :], self._xp)
 
     def raise_for_status(self) -> "SqueezeResult":
         """Raise ``RuntimeError`` with advice unless the squeeze reached its target depth."""

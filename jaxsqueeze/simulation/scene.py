@@ -353,11 +353,15 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
         per = _operators.setdefault(obj, {})
         op = per.get(key)
         if op is None:
-            if solid:
-                op = compliance(obj, Material(1.0, material.nu, 1.0), method)
-            else:
-                from ..mechanics.band import band_compliance
-                op = band_compliance(obj, 1.0)      # scaled G is independent of E
+            # built eagerly even when called under jit/vmap/jacfwd (the first squeeze of an object
+            # may be a traced one): the host-side sparse build needs concrete arrays, and the
+            # operator is cached for every later call, traced or not
+            with jax.ensure_compile_time_eval():
+                if solid:
+                    op = compliance(obj, Material(1.0, float(material.nu), 1.0), method)
+                else:
+                    from ..mechanics.band import band_compliance
+                    op = band_compliance(obj, 1.0)      # scaled G is independent of E
             if len(per) >= CACHE_PER_OBJECT:
                 per.pop(next(iter(per)))
             per[key] = op

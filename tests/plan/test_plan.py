@@ -82,6 +82,42 @@ def test_jacfwd_in_placement_matches_central_differences(ellipse):
         np.testing.assert_allclose(J[k], fd, rtol=1e-6)
 
 
+def test_derivatives_stay_finite_where_the_grip_never_started(ellipse):
+    """An infeasible placement records zero forces: the qualities that take a norm of them
+    (grip force, slip margin) have derivative 0 there, not NaN, so one infeasible member cannot
+    poison a gradient step; the margin's derivative is the one that says where to go (checked
+    against central differences: the fingertip normals swing fast between neighbouring
+    placements)."""
+    x0 = jnp.array([0.0, 0.02])
+
+    def f(s):
+        res = jsq.squeeze(ellipse.replace(placement=plan.Placement(s=s)))
+        return jnp.stack([Q.grip_force(res), res.grip_force, Q.squeeze_work(res), Q.slip_margin(res, 0.5), res.margin])
+
+    out, J = f(x0), jax.jacfwd(f)(x0)
+    assert float(out[-1]) < 0 and np.all(np.isfinite(J))
+    np.testing.assert_array_equal(J[:3], 0.0)
+    for k in range(2):       # steep (-138 rad/m): a step of 1e-6 m leaves a truncation error of 1.5e-6
+        h = np.eye(2)[k] * 1e-8
+        np.testing.assert_allclose(J[-1, k], (float(f(x0 + h)[-1]) - float(f(x0 - h)[-1])) / 2e-8, rtol=1e-6, atol=1e-6)
+    assert abs(float(J[-1, 0])) > 100
+
+
+def test_cone_angles_of_exactly_opposite_contacts_have_a_finite_derivative():
+    """Two contacts exactly on each other's normal (a symmetric grip): the angle is 0, where
+    arccos of the cosine had an infinite derivative and made jacfwd of the margin NaN."""
+    from jaxsqueeze.simulation import laws
+
+    def margin(y):
+        p = jnp.array([[0.0, -0.05], [0.0, y]])
+        return laws.grip_margin(p, jnp.array([[0.0, 1.0], [0.0, -1.0]]), 0.3, "coulomb")
+
+    assert float(jax.jacfwd(margin)(0.05)) == 0.0
+    tilt = lambda x: laws.grip_cone_angles(jnp.array([[0.0, 0.0], [x, 1.0]]), jnp.array([[0.0, 1.0], [0.0, -1.0]]))  # noqa: E731
+    np.testing.assert_allclose(tilt(1e-9), [1e-9, 1e-9], rtol=1e-12)          # exact near 0, as arccos was not
+    np.testing.assert_allclose(jax.jacfwd(tilt)(0.3), [1 / 1.09] * 2, rtol=1e-12)
+
+
 def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
     """A batch with one placement whose contacts leave the cones and one whose finger cannot
     touch returns their statuses (never NaN, never an exception) beside a good one."""

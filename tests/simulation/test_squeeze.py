@@ -363,3 +363,19 @@ def test_eager_and_jitted_squeezes_agree(slanted):
     scale = float(np.abs(eager.forces).max())
     np.testing.assert_allclose(jitted.forces, eager.forces, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(jitted.events.depth, eager.events.depth, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("transform", ["jit", "jacfwd", "vmap"])
+def test_the_first_squeeze_of_an_object_may_be_a_traced_one(transform):
+    """The compliance operator of a new object is built (host-side, sparse) and cached on the
+    first squeeze, also when that squeeze is being traced by jit, jacfwd or vmap; it used to
+    fail converting a tracer to numpy unless an eager squeeze had built it first. (Traced only,
+    not compiled: the build is what is being tested.)"""
+    mesh = jsq.shapes.disk(0.05, 0.02)       # a new object: nothing is cached for it
+    grip = (nearest(mesh, (0.0, -0.05)), nearest(mesh, (0.0, 0.05)))
+    sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
+                   fingers=jsq.Fingers(radius=0.012), grip=grip, friction=0.3, depth=0.008)
+    f = lambda mu: jsq.squeeze(sc.replace(friction=mu)).grip_force  # noqa: E731
+    g = {"jit": jax.jit(f), "jacfwd": jax.jacfwd(f), "vmap": jax.vmap(f)}[transform]
+    jax.make_jaxpr(g)(np.array([0.3, 0.4]) if transform == "vmap" else 0.3)
+    assert sc.operator().G.shape == (2 * len(mesh.boundary),) * 2
