@@ -573,7 +573,7 @@ def _check_cones(scene, key, precision: str = "float64"):
     same scaled positions and normals the engine's operator holds (points / L). So a grip the
     squeeze would refuse in float32 is refused here, before any work.
     """
-    from ..simulation.laws import grip_cone_angles, grip_half_angle, grip_margin
+    from ..simulation.laws import cone_normals, grip_cone_angles, grip_half_angle, grip_margin
 
     dt = np.float32 if precision == "float32" else np.float64
     mesh = scene.mesh
@@ -582,7 +582,8 @@ def _check_cones(scene, key, precision: str = "float64"):
     P, N = np.asarray(mesh.points), np.asarray(mesh.normals)
     L = float(np.max(np.ptp(P, axis=0)))
     Pb = (P[list(scene.boundary_nodes())] / L).astype(dt) if hasattr(mesh, "triangles") else (P / L).astype(dt)
-    Nb = N.astype(dt)
+    loops = mesh.loops if hasattr(mesh, "triangles") else (len(Pb),)
+    Nb = cone_normals(Pb, N, loops, scene.contact, xp=np).astype(dt)
     p = np.stack([Pb[pos[i]], Pb[pos[j]]])
     inward = -np.stack([Nb[pos[i]], Nb[pos[j]]])
     mu = float(scene.friction)
@@ -594,11 +595,13 @@ def _check_cones(scene, key, precision: str = "float64"):
             hint = (" The angles are within float32 round-off of the cone: with precision = \"float32\" this "
                     "grip cannot be told apart from one outside it; use accuracy.precision = \"float64\" or some "
                     "friction")
+        why, more = ((f"frictionless fingertips sit on the segment, which may turn at most {half:.3f}° from the "
+                      f"normals (precision {precision})", "") if scene.friction_model == "frictionless" else
+                     (f"the friction cones only allow {half:.3f}° (squeeze.friction = {mu:.3g}, friction_model = "
+                      f"{scene.friction_model!r}, precision {precision})", " or more friction"))
         raise SceneFileError(key, (
-            f"grip nodes ({i}, {j}): the segment between them makes {ang[0]:.3g}° and {ang[1]:.3g}° with the "
-            f"inward normals, but the friction cones only allow {half:.3g}° (squeeze.friction = "
-            f"{mu:.3g}, friction_model = {scene.friction_model!r}, precision {precision}); "
-            "choose more nearly opposite grip points or more friction." + hint))
+            f"grip nodes ({i}, {j}): the segment between them makes {ang[0]:.3f}° and {ang[1]:.3f}° with the "
+            f"inward normals, but {why}; choose more nearly opposite grip points{more}." + hint))
 
 
 def _band(obj, height, overrides=(None, None)):

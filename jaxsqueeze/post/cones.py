@@ -24,10 +24,9 @@ Definitions (per recorded row k and finger i = 0, 1; centroid frame, as the resu
     analogue of ``Mesh.normals``). This is the cone a small spherical fingertip sees (its
     contact normal is the object's surface normal), the one Fig. 3 draws.
   - ``"fingertip"``: the direction from the fingertip centre to the contact node,
-    ``unit(theta + alpha)``: the cone the squeeze engine enforces (events C/D). A sticking
-    node keeps its polar angle in the fingertip frame, so this axis only turns when the
-    node slides or the fingertip rotates (``Fingers.rotation``). With point contacts and no
-    fingertip rotation it never turns (see the note below).
+    ``unit(theta + alpha)``: the cone the squeeze engine enforces for segment contacts
+    (events C/D). A sticking node keeps its polar angle in the fingertip frame, so this axis
+    only turns when the node slides or the fingertip rotates (``Fingers.rotation``).
 
 * **misalignment** ``psi_i = angle(a_i, l_i)`` in [0, pi].
 * **rotation toward the other finger** ``toward_i(k) = psi_i(0) - psi_i(k)``: positive when
@@ -41,12 +40,17 @@ Definitions (per recorded row k and finger i = 0, 1; centroid frame, as the resu
   member, so ``F_i`` stays along the initial grasp line, and ``margin_i(k) - margin_i(0)``
   equals ``toward_i(k)`` up to the (small) turn of the grasp line.
 
-Note on point contacts. A sticking node keeps its polar angle on the fingertip (Section
-IV-B), and two contacts on a linear-elastic body form a two-force member whose forces stay
-along the initial segment, so with ``contact="point"`` and no fingertip rotation the engine's
-own cone margin is constant: a feasible grip never reaches SLIP_FAILURE. The surface cone
-does turn, and :func:`grasp_stability` reports the depth at which the force would leave it
-(``surface_slip_depth``).
+Note on point contacts. With ``contact="point"`` the engine tests a sticking contact (event
+C, and the grip check before the squeeze: ``laws.cone_normals``) against the cone about the
+deformed object's polyline normal at the node, which turns as the object bends (Section V-A):
+two contacts on a linear-elastic body form a two-force member whose forces stay along the
+initial segment, so the grasp fails (SLIP_FAILURE) when a turning cone's edge reaches that
+segment, and :func:`grasp_stability` reports the same depth from the recorded rows
+(``surface_slip_depth``; for a band its ``"surface"`` axis is the band's own rotated normal,
+within a fraction of a degree of the polyline one away from cusps). In that last row the
+contact that slides has its force on the edge of the fingertip's cone (the sliding law,
+eq. 6, is written about the fingertip normal), a few per cent of the tangential force off
+the surface cone's edge; the squeeze ends there, so no later row depends on it.
 """
 from __future__ import annotations
 

@@ -275,13 +275,17 @@ def check_grip(scene: Scene, op: Compliance) -> None:
     if g.ndim != 1:
         return
     k = boundary.positions(scene.boundary_nodes(), g)
-    P, N = np.asarray(op.points, float), np.asarray(op.normals, float)
+    P = np.asarray(op.points, float)
+    N = laws.cone_normals(P, np.asarray(op.normals, float), op.loops, scene.contact, xp=np)
     mu = float(scene.friction)
     if laws.grip_margin(P[k], -N[k], mu, scene.friction_model, xp=np) < 0:
         a, b = np.degrees(laws.grip_cone_angles(P[k], -N[k], xp=np))
         half = np.degrees(float(laws.grip_half_angle(mu, scene.friction_model, xp=np)))
+        why, fix = ((f"frictionless fingertips sit on the segment, which may turn at most {half:.3f}° from the "
+                     "normals", "") if scene.friction_model == "frictionless" else
+                    (f"the friction cones only allow {half:.3f}° (mu={mu:.3g}, friction_model="
+                     f"{scene.friction_model!r})", " or raise the friction"))
         raise ValueError(
-            f"grip {tuple(int(v) for v in g)}: the segment between the two contacts makes {a:.3g}° and "
-            f"{b:.3g}° with the inward normals, but the friction cones only allow {half:.3g}° "
-            f"(mu={mu:.3g}, friction_model={scene.friction_model!r}). Pick more nearly "
-            "opposite nodes (e.g. Scene.nearest_boundary_node) or raise the friction.")
+            f"grip {tuple(int(v) for v in g)}: the segment between the two contacts makes {a:.3f}° and "
+            f"{b:.3f}° with the inward normals, but {why}. Pick more nearly opposite nodes "
+            f"(e.g. Scene.nearest_boundary_node){fix}.")

@@ -71,6 +71,18 @@ def grip_half_angle(mu, friction_model: str, xp=jnp):
     return xp.full_like(mu, 0.5 * np.pi if friction_model == "stick" else FRICTIONLESS_TILT)
 
 
+def cone_normals(points, normals, loops, contact: str, xp=jnp):
+    """(m, 2) the outward normals the cones of a first touch are built around, as the engine
+    builds them at d = 0 (contacts.solve): for segment contacts the object's normals (an
+    integer grip's fingertip sits along them, so they are its own normal at the touch); for
+    point contacts the object's polyline normals (:func:`~jaxsqueeze.geometry.boundary.normals`),
+    the cone axis that turns as the object deforms (a band's own normals differ slightly)."""
+    if contact != "point":
+        return normals
+    from ..geometry import boundary
+    return boundary.normals(points, loops, xp=xp)
+
+
 def grip_margin(p, inward, mu, friction_model: str, xp=jnp):
     """The grip's smooth feasibility margin [rad] (> 0 feasible, 0 on the edge within
     ``CONE_SLACK``): :func:`grip_half_angle` + slack − the larger of :func:`grip_cone_angles`.
@@ -81,4 +93,4 @@ def grip_margin(p, inward, mu, friction_model: str, xp=jnp):
 
 __all__ = ["FREE", "STICK", "SLIP_POS", "SLIP_NEG", "MODE_NAMES", "EVENT_KINDS", "EVENT_MEANING", "CONE_SLACK",
            "FRICTION_MODELS", "CONTACT_MODELS", "FRICTIONLESS_TILT", "friction_angle", "cone_margin",
-           "grip_cone_angles", "grip_half_angle", "grip_margin"]
+           "grip_cone_angles", "grip_half_angle", "grip_margin", "cone_normals"]

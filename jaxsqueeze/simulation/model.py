@@ -205,8 +205,8 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
     # The cone is the fingertip's: around its normal at the contact, from the centre to the node
     # (the object's normal there for an integer grip, whose fingertip sits along it; not for a
     # placed fingertip, which closes in along the squeeze line and may touch a node obliquely)
-    inward = -op.normals[grip]
-    if cfg.placement and cfg.friction_model != "frictionless":
+    inward = -laws.cone_normals(op.points, op.normals, op.loops, cfg.contact)[grip]
+    if cfg.placement and cfg.friction_model != "frictionless" and cfg.contact != "point":
         inward = (p - o) / jnp.linalg.norm(p - o, axis=1, keepdims=True)
     margin = jnp.where(touches, laws.grip_margin(p, inward, mu, cfg.friction_model), -jnp.pi)
     base = jnp.zeros((F, 2), dt).at[:2].set(o)

@@ -26,9 +26,10 @@ def norm(v, xp=jnp):
 class EventLog(NamedTuple):
     """Contact events in the order they happened.
 
-    depth: (E,) squeeze depth of each event [m]; node: (E,) mesh node index;
+    depth: (E,) squeeze depth of each event [m] (for an event of an adversary's push: the
+    push displacement, as the result's ``push`` rows); node: (E,) mesh node index;
     kind: (E,) 0–3 for events A (new contact), B (break), C (stick→slip), D (slip→stick);
-    finger: (E,) 0 for the still finger, 1 for the moving one.
+    finger: (E,) 0 for the still finger, 1 for the moving one, 2 for the adversary's.
     """
 
     depth: jax.Array
@@ -40,7 +41,7 @@ class EventLog(NamedTuple):
         return int(np.shape(self.depth)[0])
 
     def rows(self):
-        """List of (depth [m], node, 'A'..'D', finger 0|1) for printing."""
+        """List of (depth [m], node, 'A'..'D', finger 0|1|2) for printing."""
         return [(float(d), int(n), EVENT_KINDS[int(k)], int(f))
                 for d, n, k, f in zip(*(np.asarray(a) for a in self))]
 

@@ -113,11 +113,37 @@ def test_cone_rotation_consistent(runs, name):
     # the surface normal from the deformed polyline (operator only) agrees with the exact band rotation
     c_op = cones.cone_axes(res, scene.operator(), friction=float(scene.friction))
     np.testing.assert_allclose(c_op.rotation[-1], c.rotation[-1], rtol=0.03, atol=np.radians(0.02))
-    # the engine's own cone (fingertip centre -> sticking node) does not turn with point contacts
+    # the fingertip axis (centre -> sticking node) does not turn with point contacts (the engine tests
+    # sticking point contacts against the surface cone: laws.cone_normals, contacts.solve)
     tip = cones.grasp_stability(res, scene, axis="fingertip")
     assert tip.label == "neutral" and np.allclose(tip.cones.rotation, 0.0, atol=1e-12)
     print(f"{name}: surface cones turn toward the other finger by {np.degrees(st.toward)} deg -> {st.label}; "
           f"margins {np.degrees(st.margin[0])} -> {np.degrees(st.margin[-1])} deg")
+
+
+def test_band_grip_check_uses_the_cone_the_engine_uses(runs, tmp_path):
+    """A point contact's cone turns about the band's polyline normal (contacts.solve), which
+    differs from the band's own normal (0.013° at node 22 of the heart, ~3° at its cusp). A grip whose segment lies
+    between the two (node 22: 12.2717° from the band normal, 12.2845° from the polyline one,
+    friction angle 12.2817°) used to pass the up-front check and end SLIP_FAILURE at d = 0
+    without an event; both the API and the scene file now refuse it, and accept it with a
+    hair more friction."""
+    from jaxsqueeze.simulation import api, laws
+    scene = runs["heart"][0]
+    op = scene.operator()
+    mu = float(np.tan(np.radians(12.281655)))
+    bad = scene.replace(grip=(92, 22), friction=mu)
+    with pytest.raises(ValueError, match=r"12\.28[0-9]° with the inward normals"):
+        api.check_grip(bad, op)
+    with pytest.raises(scenefile.SceneFileError, match="friction cones only allow 12.282°"):
+        scenefile._check_cones(bad, "grip.nodes")
+    P, N = np.asarray(op.points), np.asarray(op.normals)
+    poly = laws.cone_normals(P, N, op.loops, "point", xp=np)
+    turn = np.degrees(np.arccos(np.clip(np.sum(poly * N, 1), -1, 1)))
+    assert 0.005 < turn[22] < 0.05 and turn.max() > 1          # 0.013° here; ~3° at the heart's cusp
+    ok = bad.replace(friction=float(np.tan(np.radians(12.29))))
+    api.check_grip(ok, op)
+    scenefile._check_cones(ok, "grip.nodes")
 
 
 def test_heart_breaks_leaf_stabilizes(runs):

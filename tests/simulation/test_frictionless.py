@@ -84,3 +84,20 @@ def test_frictionless_is_the_small_friction_limit(runs):
     foam = jsq.squeeze(scene("foam square", "coulomb", 0.01))
     assert jsq.Status(int(foam.status)) == jsq.Status.SUCCESS
     assert foam.grip_force == pytest.approx(runs["foam square"].grip_force, rel=2e-3)
+
+
+def test_a_coarse_asymmetric_mesh_stalls_early_and_says_so():
+    """The README's limit of the drift rule: ``rectangle(0.1, 0.1, 0.01)`` gripped across its
+    middle (the mesh is not mirror-symmetric) stops with STALLED within the first 4 mm, at the
+    row where the drift rule's tangential force passes ``engine.DRIFT_SHARE``; every row before
+    it is a consistent frictionless state."""
+    from jaxsqueeze.simulation.engine import DRIFT_SHARE
+    mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01)
+    grip = (nearest(mesh, (0, -0.05)), nearest(mesh, (0, 0.05)))
+    res = jsq.squeeze(jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.01), grip=grip,
+                                friction=0.0, depth=0.015, friction_model="frictionless"))
+    assert res.status == jsq.Status.STALLED and 0 < res.final_depth < 0.004
+    fn, ft, on = radial_split(res)
+    big = np.abs(np.asarray(res.forces)).max(axis=(1, 2))
+    assert np.all(np.abs(ft[:-1][on[:-1]]) <= np.broadcast_to(DRIFT_SHARE * big[:-1, None], ft[:-1].shape)[on[:-1]])
+    assert np.any(np.abs(ft[-1][on[-1]]) > DRIFT_SHARE * big[-1])

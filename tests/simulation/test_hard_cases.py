@@ -270,6 +270,16 @@ def test_cone_check_agrees_between_api_and_scene_file():
     scenefile._check_cones(scene, "grip.nodes")         # so should the scene file
 
 
+def test_a_frictionless_grip_refusal_does_not_ask_for_friction():
+    """Friction does not enter a frictionless grip's check (its fingertips sit on the segment):
+    the message names the allowed turn instead of a friction cone, and no friction fixes it."""
+    grip, ang = _edge_grip()
+    scene = base_scene(grip=grip, friction=10.0, friction_model="frictionless")
+    with pytest.raises(ValueError, match="frictionless fingertips sit on the segment") as err:
+        grasp_mod.check_grip(scene, scene.operator())
+    assert "friction cones" not in str(err.value) and "raise the friction" not in str(err.value)
+
+
 # ============================================================================ geometry
 def test_grip_at_corner_nodes():
     """Opposite corners: the node normal is the bisector (-1, -1)/√2 of the two edge normals
