@@ -232,7 +232,10 @@ def reconcile(model: Model, st: State) -> State:
 def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
     """Adopt a solved configuration at depth d as the next row (slip angles move, anchors stay),
     and record it (:func:`finish`)."""
-    d = jnp.where(d >= model.D * (1 - 1e-12), model.D, d)     # an event located at the target ends there
+    # a grip that cannot start (invalid input, infeasible grip) records its touch unloaded: the
+    # solve of a placed finger that touches nothing means nothing, and may not even be finite
+    start = (st.fault != Status.INVALID_INPUT) & (st.fault != Status.INFEASIBLE_GRIP)
+    d = jnp.where(start & (d >= model.D * (1 - 1e-12)), model.D, d)   # an event located at the target ends there
     angle = st.slots.spread()(sol.th, st.nodes.theta)
     armed = _arm(st.nodes.armed, sol)
     s = st.stats
@@ -245,9 +248,6 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
         big = DRIFT_SHARE * jnp.maximum(jnp.max(jnp.abs(sol.F)), floor)
         off = jnp.any(on & ((jnp.abs(sol.ft) > big) | (sol.fn < -big)))
         fault = jnp.where(off & (fault == RUNNING), Status.STALLED, fault).astype(jnp.int32)
-    # a grip that cannot start (invalid input, infeasible grip) records its touch unloaded: the
-    # solve of a placed finger that touches nothing means nothing, and may not even be finite
-    start = (st.fault != Status.INVALID_INPUT) & (st.fault != Status.INFEASIBLE_GRIP)
     F, u, g = (jnp.where(start, a, 0.0) for a in (sol.F, sol.u, sol.g))
     st = _with(st, d=d, nodes=st.nodes._replace(theta=angle, armed=armed), angle=angle, F=F, u=u,
                g=g, e=sol.e, de=dsol.e, stats=stats, phase=jnp.array(ADVANCE, jnp.int32), fault=fault)

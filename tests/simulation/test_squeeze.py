@@ -172,6 +172,23 @@ def test_vmap_over_friction_equals_loop(slanted):
         np.testing.assert_allclose(batched[k], single, rtol=1e-10, atol=1e-12 * np.abs(single).max())
 
 
+def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
+    """Inside vmap a bad number cannot raise: its lane reports INVALID_INPUT with the index of
+    the field (depth), records one unloaded row at depth 0 (not the invalid depth echoed back),
+    and the good lane equals the eager squeeze."""
+    from jaxsqueeze.simulation import validate
+    d0 = float(slanted.depth)
+    out = jax.vmap(lambda d: jsq.squeeze(slanted.replace(depth=d)))(jnp.array([d0, 0.0, -0.004]))
+    assert [jsq.Status(int(v)) for v in out.status] == [jsq.Status.SUCCESS] + [jsq.Status.INVALID_INPUT] * 2
+    assert list(np.asarray(out.invalid)[1:]) == [validate.FIELDS.index("depth")] * 2
+    np.testing.assert_array_equal(np.asarray(out.final_depth)[1:], 0.0)
+    np.testing.assert_array_equal(np.asarray(out.count)[1:], 1)
+    assert np.all(np.asarray(out.forces)[1:] == 0)
+    eager = jsq.squeeze(slanted)
+    np.testing.assert_allclose(np.asarray(out.final_forces)[0], eager.final_forces, rtol=1e-10,
+                               atol=1e-12 * np.abs(eager.final_forces).max())
+
+
 def test_vmap_over_grips_equals_loop(mesh, centred):
     grips = jnp.array([centred.grip, (nearest(mesh, (0.006, -0.05)), nearest(mesh, (0.006, 0.05)))])
 
