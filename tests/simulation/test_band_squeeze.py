@@ -121,7 +121,7 @@ def test_cone_rotation_consistent(runs, name):
           f"margins {np.degrees(st.margin[0])} -> {np.degrees(st.margin[-1])} deg")
 
 
-def test_band_grip_check_uses_the_cone_the_engine_uses(runs, tmp_path):
+def test_band_grip_check_uses_the_cone_the_engine_uses(runs):
     """A point contact's cone turns about the band's polyline normal (contacts.solve), which
     differs from the band's own normal (0.013° at node 22 of the heart, ~3° at its cusp). A grip whose segment lies
     between the two (node 22: 12.2717° from the band normal, 12.2845° from the polyline one,
