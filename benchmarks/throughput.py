@@ -30,6 +30,7 @@ Every row records the 1-minute load average. Writes ``results/throughput.csv`` a
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -145,12 +146,10 @@ TARGETS = {   # issue 11, "where it should be"
 _WORKER_CACHE: dict = {}
 
 
-def scene_inputs(eager: bool = False):
+def scene_inputs(eager: bool = False, fused: bool = False):
     """(scene, op without field map, grasp, config, grip positions for candidates) of the foam
     square; the config's contact slots are an ``eager`` ``jsq.squeeze``'s (32) or a traced one's
-    (64, what ``vmap`` runs)."""
-    import dataclasses
-
+    (64, what ``vmap`` runs); ``fused``: its loop compiled as one kernel (``Settings.fused``)."""
     from jaxsqueeze.simulation import api as G
     from squeeze import foam
     sc = foam()
@@ -158,7 +157,8 @@ def scene_inputs(eager: bool = False):
     op0 = dataclasses.replace(op, field=None)
     pos = np.full(int(np.max(np.asarray(op.nodes))) + 1, -1)
     pos[np.asarray(op.nodes)] = np.arange(op.m)
-    return sc, op0, G.grasp_of(sc, op), G.eager_config(sc, op) if eager else G.config_of(sc), pos
+    cfg = G.eager_config(sc, op) if eager else G.config_of(sc)
+    return sc, op0, G.grasp_of(sc, op), dataclasses.replace(cfg, fused=fused), pos
 
 
 def grips(mesh, B):
@@ -203,16 +203,16 @@ def worker(argv):
         os.environ["XLA_FLAGS"] = host_devices_flag()
     import jax
     jax.config.update("jax_enable_x64", True)
-    if kind == "compile":       # compile [CACHE_DIR | plain]
+    if kind == "compile":       # compile [CACHE_DIR | plain | fused]
         events = {}
         jax.monitoring.register_event_listener(lambda name, **kw: events.__setitem__(name, events.get(name, 0) + 1))
-        plain = argv[1:] == ["plain"]
-        if len(argv) > 1 and not plain:
+        plain, fused = argv[1:] == ["plain"], argv[1:] == ["fused"]
+        if len(argv) > 1 and not (plain or fused):
             from jaxsqueeze import compile_cache
             compile_cache.enable(argv[1])
         t0 = time.perf_counter()
         from jaxsqueeze.simulation import api as G
-        sc, op0, gr, cfg, pos = scene_inputs(eager=True)
+        sc, op0, gr, cfg, pos = scene_inputs(eager=True, fused=fused)
         t1 = time.perf_counter()
         # an eager jsq.squeeze compiles _run as a top-level program with compiler.options();
         # "plain" is the same program without them (what a squeeze inside a user's jit compiles)
@@ -222,14 +222,14 @@ def worker(argv):
         t3 = time.perf_counter()
         print(json.dumps(dict(setup_s=t1 - t0, trace_lower_s=t2 - t1, compile_s=t3 - t2,
                               cache_hits=events.get("/jax/compilation_cache/cache_hits", 0))), flush=True)
-    elif kind in ("vmap", "split"):        # vmap B [reps] / split B [reps]
-        import dataclasses
+    elif kind in ("vmap", "split"):        # vmap B [reps] / split B [reps [fused]]
         import jax.numpy as jnp
 
         from jaxsqueeze.batch import split_vmap
         from jaxsqueeze.simulation import api as G
         B = int(argv[1])
-        sc, op0, gr, cfg, pos = scene_inputs()
+        fused = argv[3:] == ["fused"]      # the eager capacities, the loop as one kernel
+        sc, op0, gr, cfg, pos = scene_inputs(eager=fused, fused=fused)
         dev = jax.devices()[0]
         q = jnp.asarray(pos[grips(sc.mesh, B)])
 
@@ -331,6 +331,15 @@ def main(argv=None):
     t_1b, _ = best_of(core_1blas, a.reps)
     rec("squeeze", "core with OpenBLAS limited to 1 thread (threadpoolctl)", seconds=t_1b, rows=n_rows,
         per_row_ms=1e3 * t_1b / n_rows, note="the squeeze's LAPACK calls are tiny; BLAS threads only wait")
+    cfg_fused = dataclasses.replace(cfg, fused=True)
+    t = time.perf_counter()
+    core_f = G._run.lower(op0, gr, cfg_fused).compile()
+    rec("compile", "in this process, the loop as one kernel (Settings.fused)", seconds=time.perf_counter() - t)
+    t_f, out_f = best_of(lambda: jax.block_until_ready(core_f(op0, gr)), a.reps)
+    F0, F1 = np.asarray(out[0].forces), np.asarray(out_f[0].forces)
+    rec("squeeze", "core, the loop as one kernel (Settings.fused), best of reps", seconds=t_f, rows=int(out_f[0].count),
+        per_row_ms=1e3 * t_f / int(out_f[0].count), target=TARGETS["per_squeeze"],
+        note=f"same rows: {int(out_f[0].count) == n_rows}; forces differ by {np.max(np.abs(F1 - F0)):.1e} N")
     op = sc.operator()
     t_sq, _ = best_of(lambda: jsq.squeeze(sc.replace(friction=0.2 + 1e-9 * np.random.rand()), op=op), a.reps)
     rec("squeeze", "jsq.squeeze (incl. validation and trim)", seconds=t_sq, rows=n_rows,
@@ -338,8 +347,6 @@ def main(argv=None):
 
     # ---- the NumPy reference row on a representative recorded row (most sliding contacts): the
     # squeeze is run again with max_steps = k, so its final state is the contact set of row k
-    import dataclasses
-
     from jaxsqueeze.simulation import contacts
     st = jax.jit(lambda o, g: E.simulate(o, g, cfg))(op0, gr)
     modes = np.asarray(st.hist[1][:n_rows])
@@ -381,6 +388,10 @@ def main(argv=None):
         if r:
             rec("compile", "cold, fresh process, plain jax.jit (no compiler options)",
                 seconds=r[0]["trace_lower_s"] + r[0]["compile_s"], **r[0])
+        r, _ = sub(["compile", "fused"], 300)
+        if r:
+            rec("compile", "cold, fresh process, the loop as one kernel (Settings.fused)",
+                seconds=r[0]["trace_lower_s"] + r[0]["compile_s"], **r[0])
     with tempfile.TemporaryDirectory() as tmp:
         r1, _ = sub(["compile", tmp], 300)
         r2, _ = sub(["compile", tmp], 300)
@@ -419,6 +430,13 @@ def main(argv=None):
             r, to = sub(["split", B, a.reps], a.vmap_timeout)
             if len(r) >= 2:
                 rec("batch", f"batch.split_vmap over {r[0]['devices']} host devices (one per core)", batch=B,
+                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
+                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], success=r[1]["success"],
+                    ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])
+            r, to = sub(["split", B, a.reps, "fused"], a.vmap_timeout)
+            if len(r) >= 2:
+                rec("batch", f"batch.split_vmap over {r[0]['devices']} host devices, the loop as one kernel "
+                    "(Settings.fused, eager capacities: 32 slots, 8 sliding)", batch=B,
                     compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
                     evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], success=r[1]["success"],
                     ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])

@@ -14,19 +14,38 @@ an error, so :func:`jit` gives a function that
   :func:`options` — the options of :data:`CPU_OPTIONS` this jaxlib accepts, probed once;
 * called inside ``jit``, ``vmap`` or ``jvp``, is the plain ``jax.jit`` of the same function.
 
+**One kernel** (:func:`one_kernel`). XLA:CPU runs a program as a sequence of kernels and
+pays a dispatch for each, a few tenths of a microsecond; a squeeze loop iteration runs ~300
+of them for a few microseconds of arithmetic. A ``call`` that carries the frontend attribute
+``xla_cpu_small_call`` (and ``inlineable="false"``, so that it survives XLA's call inliner)
+is compiled through XLA:CPU's whole-computation emitter into a single kernel, loops and
+conditionals included: the foam-square squeeze runs ~40 % faster, and its program takes
+~2.5 s longer to compile (``benchmarks/README.md``). That emitter cannot contain custom
+calls (LAPACK: :func:`in_kernel` lets :mod:`jaxsqueeze.mechanics.linalg` pick plain JAX
+operations there), XNNPACK/YNNPACK custom fusions (the top-level options turn those off,
+:func:`can_fuse`), nor a parameter that the optimised program leaves unused (XLA aborts the
+process), which is why its read-only inputs reach the kernel packed into one buffer.
+
 Nothing global is changed (DESIGN 4): no ``XLA_FLAGS``, no JAX config.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
+import threading
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax import lax
 
 from .tracing import is_concrete
 
+#: keep XNNPACK/YNNPACK custom fusions out of the program (a one-kernel region cannot hold
+#: them; the other programs run as fast without them)
+NO_CUSTOM_FUSIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_cpu_experimental_xnn_fusion_type": ""}
 #: options for the library's top-level programs on the CPU (applied only where accepted)
-CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
+CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1, **NO_CUSTOM_FUSIONS}
 
 
 @functools.lru_cache(maxsize=None)
@@ -79,6 +98,86 @@ class TopLevelJit:
         return n + (self._tuned._cache_size() if self._tuned not in (None, self.plain) else 0)
 
 
+def can_fuse() -> bool:
+    """True where a top-level program may hold :func:`one_kernel` regions: on the CPU, with a
+    jaxlib that accepted the options keeping custom fusions out (:data:`NO_CUSTOM_FUSIONS`).
+    Only programs compiled by :func:`jit` at the top level get those options."""
+    return jax.default_backend() == "cpu" and set(NO_CUSTOM_FUSIONS.items()) <= set(options())
+
+
+_KERNEL = threading.local()
+
+
+def in_kernel() -> bool:
+    """True while :func:`one_kernel` traces its region (code there must not emit custom calls)."""
+    return getattr(_KERNEL, "depth", 0) > 0
+
+
+@contextlib.contextmanager
+def _tracing_kernel():
+    _KERNEL.depth = getattr(_KERNEL, "depth", 0) + 1
+    try:
+        yield
+    finally:
+        _KERNEL.depth -= 1
+
+
+_UNSIGNED = {1: jnp.uint8, 2: jnp.uint16, 4: jnp.uint32, 8: jnp.uint64}
+
+
+def _to_words(x, word) -> jax.Array:
+    """x raveled into unsigned words (bit patterns, zero-extended to the word size)."""
+    if x.dtype == jnp.bool_:
+        return x.astype(word).reshape(-1)
+    return lax.bitcast_convert_type(x, _UNSIGNED[np.dtype(x.dtype).itemsize]).astype(word).reshape(-1)
+
+
+def _from_words(w, like) -> jax.Array:
+    if like.dtype == jnp.bool_:
+        return (w != 0).reshape(like.shape)
+    bits = w.astype(_UNSIGNED[np.dtype(like.dtype).itemsize])
+    return lax.bitcast_convert_type(bits, like.dtype).reshape(like.shape)
+
+
+def one_kernel(fn, consts, state):
+    """``fn(consts, state)``, a new state of the same structure and types, compiled by XLA:CPU
+    as one kernel (see the module docstring): for a region whose operations are many and
+    small, such as a ``lax.while_loop`` of small solves.
+
+    ``consts`` reach the kernel packed into one buffer of words (a parameter the optimised program
+    leaves unused would abort XLA), the state leaves as they are (each is an output, so each is
+    used). Every input must be an argument: a closed-over array would be a parameter of its
+    own. Weakly typed constants arrive strongly typed (same dtype: the library's models hold
+    one precision, so promotion inside ``fn`` does not change). ``fn`` is traced with
+    :func:`in_kernel` set. Off the CPU this is ``fn(consts, state)``.
+    The caller's program must be compiled with :data:`NO_CUSTOM_FUSIONS` (:func:`can_fuse`):
+    inside a user's ``jit`` XLA may form a custom fusion in the region, which then fails to
+    compile (``UNIMPLEMENTED: Fusion kind not implemented on CPU``).
+    """
+    if jax.default_backend() != "cpu":
+        return fn(consts, state)
+    leaves, tree = jax.tree.flatten(consts)
+    leaves = [jnp.asarray(x) for x in leaves]
+    word = jnp.uint64 if jax.config.jax_enable_x64 else jnp.uint32
+    packed = jnp.concatenate([_to_words(x, word) for x in leaves] + [jnp.zeros(1, word)])
+
+    def region(buf, state):
+        parts, at = [], 0
+        for x in leaves:
+            parts.append(_from_words(lax.slice_in_dim(buf, at, at + x.size), x))
+            at += x.size
+        new = fn(jax.tree.unflatten(tree, parts), state)
+        if jax.tree.structure(new) != jax.tree.structure(state) or any(
+                (a.shape, a.dtype) != (b.shape, b.dtype) for a, b in zip(jax.tree.leaves(new), jax.tree.leaves(state))):
+            raise TypeError("one_kernel: fn must return a state of the structure, shapes and dtypes it was given")
+        return new
+
+    with _tracing_kernel():
+        out = jax.jit(region)(packed, state)
+    from jax.experimental.xla_metadata import set_xla_metadata
+    return set_xla_metadata(out, inlineable="false", xla_cpu_small_call="true")
+
+
 def jit(fun=None, **jit_kwargs):
     """:class:`TopLevelJit` of ``fun``; usable as ``@jit`` or ``@jit(static_argnames=...)``."""
     if fun is None:
@@ -86,4 +185,4 @@ def jit(fun=None, **jit_kwargs):
     return TopLevelJit(fun, **jit_kwargs)
 
 
-__all__ = ["CPU_OPTIONS", "TopLevelJit", "jit", "options"]
+__all__ = ["CPU_OPTIONS", "NO_CUSTOM_FUSIONS", "TopLevelJit", "can_fuse", "in_kernel", "jit", "one_kernel", "options"]

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax import lax
 
 from jaxsqueeze import compiler
 
@@ -50,3 +51,55 @@ def test_an_option_this_jaxlib_rejects_is_left_out(fresh_options):
     f = compiler.jit(_f, static_argnums=(1,))
     np.testing.assert_array_equal(f(jnp.ones(3), 3.0), _f(jnp.ones(3), 3.0))
     assert f._tuned is f.plain
+
+
+def _loop(consts, state):
+    """A while loop of many small operations (what one_kernel is for); reads every kind of
+    constant, one of them only in a branch XLA can see is never taken."""
+    A, k, on, unused = consts
+
+    def body(c):
+        x, i = c
+        y = jnp.where(on, jnp.tanh(A @ x) + k[i % k.shape[0]], x)
+        return jnp.where(i < -1, unused, y), i + 1
+    return lax.while_loop(lambda c: c[1] < 50, body, state)
+
+
+def test_one_kernel_compiles_a_region_as_one_call_with_the_same_result():
+    if not compiler.can_fuse():
+        pytest.skip("one-kernel regions need the CPU backend and its options")
+    rng = np.random.default_rng(0)
+    consts = (jnp.asarray(rng.normal(size=(6, 6)) / 3), jnp.asarray(rng.normal(size=4)),
+              jnp.asarray(rng.random(6) > 0.3), jnp.ones(6))
+    state = (jnp.asarray(rng.normal(size=6)), jnp.array(0, jnp.int32))
+    seen = []
+
+    def fn(c, s):
+        seen.append(compiler.in_kernel())
+        return _loop(c, s)
+
+    f = compiler.jit(lambda c, s: compiler.one_kernel(fn, c, s))
+    x, i = f(consts, state)
+    want_x, want_i = jax.jit(_loop)(consts, state)
+    np.testing.assert_allclose(x, want_x, rtol=1e-14, atol=1e-15)
+    assert int(i) == int(want_i) == 50 and seen == [True] and not compiler.in_kernel()
+    text = f.lower(consts, state).compile().as_text()
+    calls = [ln for ln in text.splitlines() if " call(" in ln and 'xla_cpu_small_call="true"' in ln]
+    assert calls, "the region was inlined instead of kept as one kernel"
+    with pytest.raises(TypeError, match="structure"):
+        compiler.jit(lambda c, s: compiler.one_kernel(lambda c, s: s[0], c, s))(consts, state)
+
+
+def test_gauss_jordan_solves_like_lapack_and_differentiates_alike():
+    from jaxsqueeze.mechanics.linalg import gauss_jordan
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 5, 12):
+        A = rng.normal(size=(n, n)) + n * np.eye(n)[rng.permutation(n)]   # pivots off the diagonal
+        for B in (rng.normal(size=n), rng.normal(size=(n, 3))):
+            np.testing.assert_allclose(gauss_jordan(jnp.asarray(A), jnp.asarray(B)), np.linalg.solve(A, B),
+                                       rtol=1e-12, atol=1e-13)
+    dA, dB = rng.normal(size=(n, n)), rng.normal(size=n)
+    _, t = jax.jvp(gauss_jordan, (jnp.asarray(A), jnp.asarray(B[:, 0])), (dA, dB))
+    _, want = jax.jvp(jnp.linalg.solve, (jnp.asarray(A), jnp.asarray(B[:, 0])), (dA, dB))
+    np.testing.assert_allclose(t, want, rtol=1e-11, atol=1e-12)
+    assert not np.all(np.isfinite(gauss_jordan(jnp.ones((3, 3)), jnp.ones(3))))

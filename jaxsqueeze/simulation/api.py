@@ -28,7 +28,9 @@ from .status import Status
 # ----------------------------------------------------------------------------- scene → core inputs
 def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config:
     """The static configuration of a scene; its contact slots are ``Settings.slots`` (the
-    automatic capacity of an ``eager`` squeeze starts smaller and grows, :func:`squeeze`)."""
+    automatic capacity of an ``eager`` squeeze starts smaller and grows, :func:`squeeze`).
+    ``Settings.fused`` holds for ``eager`` squeezes only, where :func:`_run` compiles at
+    the top level with the options a one-kernel loop needs."""
     s = scene.settings
     capacity = s.slots(len(scene.boundary_nodes()), eager)
     # every frictionless contact slides: without a sliding capacity it keeps both systems
@@ -39,7 +41,7 @@ def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config
                   max_steps=int(s.max_steps), max_events=int(s.max_events),
                   newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
                   placement=scene.placement is not None, adversary=scene.adversary is not None,
-                  history=history)
+                  history=history, fused=bool(eager and s.fused and compiler.can_fuse()))
 
 
 def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:

@@ -59,7 +59,7 @@ DRIFT_TOL = (1e-12, 1e-4)
 
 
 def unit(a):
-    return jnp.stack([jnp.cos(a), jnp.sin(a)], axis=-1)
+    return lax.optimization_barrier(jnp.stack([jnp.cos(a), jnp.sin(a)], axis=-1))
 
 
 def cross2(a, b):
@@ -378,7 +378,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
     K = eps = None
     if held:
         N = model.op.N
-        lift = jnp.concatenate([jnp.linalg.solve(N.T @ N, N.T @ sl.Gc), jnp.eye(3, dtype=N.dtype)], axis=1)
+        lift = jnp.concatenate([linalg.solve(N.T @ N, N.T @ sl.Gc), jnp.eye(3, dtype=N.dtype)], axis=1)
         fit = (lift @ sl.Minv)[:, : 2 * S]
         e = model.axis
         K = jnp.stack([-e[1] * fit[0] + e[0] * fit[1], fit[2]]).reshape(2, S, 2)
@@ -505,8 +505,8 @@ def solve(model: Model, sl: Slots, ns: Nodes, d, hold=None) -> Solution:
     iters, resid, ok = jnp.array(0, jnp.int32), jnp.zeros((), v.theta0.dtype), jnp.array(True)
     hold = jnp.zeros(2, v.theta0.dtype) if hold is None else hold
     th, ok, iters, resid, rate, drift = _slip_angles(model, sl, v, d, hold)
-    p = C + r[:, None] * unit(th + alpha) - op.points[v.idx]
     axis = unit(th + alpha)                # cone axis: from the tip centre to the node
+    p = C + r[:, None] * axis - op.points[v.idx]
     f, g = _linear(model, sl, v, p)
     f = jnp.where(v.active[:, None], f, 0.0)
     u = (sl.Gc @ f.reshape(-1) + op.N @ g).reshape(m, 2)

@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .. import compiler
 from ..mechanics.operator import Compliance
 from . import contacts, laws
 from .contacts import Nodes, Slots, Solution
@@ -546,9 +547,14 @@ def finish(model: Model, st: State, ok) -> State:
 
 
 # ----------------------------------------------------------------------------- the loop
-def run(model: Model, st: State) -> State:
-    """``step`` in a ``lax.while_loop`` until ``finish`` sets a status."""
+def _loop(model: Model, st: State) -> State:
     return lax.while_loop(lambda s: s.status == RUNNING, lambda s: step(model, s), st)
+
+
+def run(model: Model, st: State) -> State:
+    """``step`` in a ``lax.while_loop`` until ``finish`` sets a status; with ``Config.fused``
+    the loop is compiled as one CPU kernel (:func:`jaxsqueeze.compiler.one_kernel`)."""
+    return compiler.one_kernel(_loop, model, st) if model.cfg.fused else _loop(model, st)
 
 
 def start_push(model: Model, st: State) -> State:

@@ -33,6 +33,7 @@ class Config:
     placement: bool = False           # fingers placed by arc length (an approach finds first touch)
     adversary: bool = False           # a third finger pushes after the squeeze (a second phase)
     history: bool = True              # record every row; False keeps two (end of squeeze, last)
+    fused: bool = False               # the loop as one CPU kernel (engine.run; top-level programs only)
 
     @property
     def rows(self) -> int:

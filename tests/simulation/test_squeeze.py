@@ -1,4 +1,6 @@
 """The squeeze grasp (Section IV): invariants, symmetry, friction limits, convergence, JAX properties."""
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -250,6 +252,34 @@ def test_a_second_eager_squeeze_compiles_nothing(slanted):
         jax.monitoring.unregister_event_duration_listener(listener)
     assert res.displacement is not None and res.displacement.shape == slanted.mesh.points.shape
     assert compiled == []
+
+
+def test_fused_squeeze_is_the_same_squeeze_in_one_kernel(slanted):
+    """Settings(fused=True): an eager squeeze compiles its loop as one CPU kernel
+    (compiler.one_kernel, with Gauss-Jordan in place of LAPACK) and gives the squeeze of the
+    usual program: the same rows, modes, events and status, forces to round-off. A traced
+    squeeze keeps the usual program (the caller's compile has no one-kernel options)."""
+    from jaxsqueeze import compiler
+    from jaxsqueeze.simulation import engine
+    fused = slanted.replace(settings=dataclasses.replace(slanted.settings, fused=True))
+    assert not grasp_mod.config_of(fused).fused
+    assert grasp_mod.config_of(fused, eager=True).fused == compiler.can_fuse()
+    if not compiler.can_fuse():
+        pytest.skip("one-kernel loops need the CPU backend and its options")
+    calls = []
+    run = engine.run
+    try:        # the fused program is traced once here (a new static config): count its kernels
+        engine.run = lambda model, st: calls.append(model.cfg.fused) or run(model, st)
+        a, b = jsq.squeeze(slanted), jsq.squeeze(fused)
+    finally:
+        engine.run = run
+    assert True in calls
+    assert (a.count, a.status) == (b.count, b.status) and a.outcome == jsq.Status.SUCCESS
+    np.testing.assert_array_equal(a.modes, b.modes)
+    assert [e[1:] for e in a.events.rows()] == [e[1:] for e in b.events.rows()]
+    np.testing.assert_allclose([e[0] for e in b.events.rows()], [e[0] for e in a.events.rows()], rtol=1e-9)
+    np.testing.assert_allclose(b.forces, a.forces, rtol=0, atol=1e-9 * np.abs(a.forces).max())
+    np.testing.assert_allclose(b.displacement, a.displacement, rtol=0, atol=1e-9 * np.abs(a.displacement).max())
 
 
 def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monkeypatch):
