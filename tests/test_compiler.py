@@ -103,3 +103,17 @@ def test_gauss_jordan_solves_like_lapack_and_differentiates_alike():
     _, want = jax.jvp(jnp.linalg.solve, (jnp.asarray(A), jnp.asarray(B[:, 0])), (dA, dB))
     np.testing.assert_allclose(t, want, rtol=1e-11, atol=1e-12)
     assert not np.all(np.isfinite(gauss_jordan(jnp.ones((3, 3)), jnp.ones(3))))
+
+
+def test_one_kernel_refuses_to_differentiate_its_packed_constants():
+    """Constants reach the kernel as bit patterns: a derivative through them would be zero,
+    so asking for one is an error; the state differentiates."""
+    if not compiler.can_fuse():
+        pytest.skip("one-kernel regions need the CPU backend and its options")
+
+    def f(k, x0):
+        return compiler.one_kernel(lambda c, s: (s[0] * c, s[1] + 1), k, (x0, jnp.array(0)))[0]
+    with pytest.raises(TypeError, match="differentiated"):
+        jax.jvp(lambda k: f(k, 2.0 * jnp.ones(3)), (jnp.ones(3),), (jnp.ones(3),))
+    _, t = jax.jvp(lambda x: f(3.0 * jnp.ones(3), x), (jnp.ones(3),), (jnp.ones(3),))
+    np.testing.assert_allclose(t, 3.0)

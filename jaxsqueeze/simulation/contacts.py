@@ -59,6 +59,9 @@ DRIFT_TOL = (1e-12, 1e-4)
 
 
 def unit(a):
+    """(cos a, sin a) stacked on a last axis. Computed once and kept: without the barrier
+    XLA recomputes the cosine and sine inside every fusion that reads them (seven times per
+    solve for the slots' cone axes, the costliest operations of a one-kernel loop)."""
     return lax.optimization_barrier(jnp.stack([jnp.cos(a), jnp.sin(a)], axis=-1))
 
 
