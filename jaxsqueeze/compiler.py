@@ -51,15 +51,19 @@ CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_l
 @functools.lru_cache(maxsize=None)
 def options() -> tuple:
     """The (name, value) pairs of :data:`CPU_OPTIONS` that this jaxlib accepts on the default
-    backend, each probed by compiling a one-op program with it; ``()`` off the CPU."""
+    backend, probed by compiling a one-op program with all of them (and with each alone when
+    that fails); ``()`` off the CPU."""
     if jax.default_backend() != "cpu":
         return ()
-    return tuple(item for item in sorted(CPU_OPTIONS.items()) if _accepted(*item))
+    items = tuple(sorted(CPU_OPTIONS.items()))
+    if _accepted(dict(items)):      # one probe when all are known (the usual case)
+        return items
+    return tuple(item for item in items if _accepted(dict([item])))
 
 
-def _accepted(name, value) -> bool:
+def _accepted(opts: dict) -> bool:
     try:
-        jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(jnp.zeros(())).compile()
+        jax.jit(lambda x: x + 1, compiler_options=opts).lower(jnp.zeros(())).compile()
     except Exception:   # noqa: BLE001  (a jaxlib without this option: compile without it)
         return False
     return True
