@@ -20,11 +20,15 @@ of them for a few microseconds of arithmetic. A ``call`` that carries the fronte
 ``xla_cpu_small_call`` (and ``inlineable="false"``, so that it survives XLA's call inliner)
 is compiled through XLA:CPU's whole-computation emitter into a single kernel, loops and
 conditionals included: the foam-square squeeze runs ~40 % faster, and its program takes
-~2.5 s longer to compile (``benchmarks/README.md``). That emitter cannot contain custom
+~2.4 s longer to compile (``benchmarks/README.md``). That emitter cannot contain custom
 calls (LAPACK: :func:`in_kernel` lets :mod:`jaxsqueeze.mechanics.linalg` pick plain JAX
 operations there), XNNPACK/YNNPACK custom fusions (the top-level options turn those off,
 :func:`can_fuse`), nor a parameter that the optimised program leaves unused (XLA aborts the
-process), which is why its read-only inputs reach the kernel packed into one buffer.
+process), which is why its read-only inputs reach the kernel packed into one vector, behind
+an optimization barrier (XLA would sink constant inputs into the kernel), and why derivatives
+are taken of the region as ordinary operations (the jvp of a kernel call can leave a tangent
+unused). :func:`top_level_trace` tells code traced for a library-compiled program (where
+the options hold) from code traced in a user's ``jit``.
 
 Nothing global is changed (DESIGN 4): no ``XLA_FLAGS``, no JAX config.
 """
@@ -90,11 +94,15 @@ class TopLevelJit:
         return self._tuned
 
     def __call__(self, *args, **kwargs):
-        return (self._top() if _top_level(args, kwargs) else self.plain)(*args, **kwargs)
+        if not _top_level(args, kwargs):
+            return self.plain(*args, **kwargs)
+        with _depth(_TOP):
+            return self._top()(*args, **kwargs)
 
     def lower(self, *args, **kwargs):
         """Lower for a top-level compile (what an eager call compiles)."""
-        return self._top().lower(*args, **kwargs)
+        with _depth(_TOP):
+            return self._top().lower(*args, **kwargs)
 
     def _cache_size(self) -> int:
         """Compiled programs held, both variants (tests check that a call did not recompile)."""
@@ -109,7 +117,16 @@ def can_fuse() -> bool:
     return jax.default_backend() == "cpu" and set(NO_CUSTOM_FUSIONS.items()) <= set(options())
 
 
-_KERNEL = threading.local()
+_KERNEL, _TOP = threading.local(), threading.local()
+
+
+@contextlib.contextmanager
+def _depth(flag):
+    flag.depth = getattr(flag, "depth", 0) + 1
+    try:
+        yield
+    finally:
+        flag.depth -= 1
 
 
 def in_kernel() -> bool:
@@ -117,43 +134,28 @@ def in_kernel() -> bool:
     return getattr(_KERNEL, "depth", 0) > 0
 
 
-@contextlib.contextmanager
-def _tracing_kernel():
-    _KERNEL.depth = getattr(_KERNEL, "depth", 0) + 1
-    try:
-        yield
-    finally:
-        _KERNEL.depth -= 1
+def top_level_trace() -> bool:
+    """True while a :func:`jit` function is traced for a top-level compile, i.e. with
+    :func:`options` (an eager squeeze, the planner's programs, :func:`~jaxsqueeze.batch.split_vmap`):
+    where :func:`one_kernel` regions may go when :func:`can_fuse`."""
+    return getattr(_TOP, "depth", 0) > 0
 
 
 #: constants of :func:`one_kernel` with more elements than this are passed on unpacked
 PACK_LIMIT = 4096
-_UNSIGNED = {1: jnp.uint8, 2: jnp.uint16, 4: jnp.uint32, 8: jnp.uint64}
 
 
-def _to_words(x, word) -> jax.Array:
-    """x raveled into unsigned words (bit patterns, zero-extended to the word size)."""
-    if x.dtype == jnp.bool_:
-        return x.astype(word).reshape(-1)
-    return lax.bitcast_convert_type(x, _UNSIGNED[np.dtype(x.dtype).itemsize]).astype(word).reshape(-1)
+def _pack(leaves) -> jax.Array:
+    """The leaves raveled into one vector of their float type, by value (differentiable; an
+    integer is exact below 2**24 in float32 and 2**53 in float64)."""
+    floats = [x.dtype for x in leaves if jnp.issubdtype(x.dtype, jnp.floating)]
+    dtype = jnp.result_type(*floats) if floats else jnp.zeros(()).dtype
+    return jnp.concatenate([x.astype(dtype).reshape(-1) for x in leaves] + [jnp.zeros(1, dtype)])
 
 
-def _from_words(w, like) -> jax.Array:
-    if like.dtype == jnp.bool_:
-        return (w != 0).reshape(like.shape)
-    bits = w.astype(_UNSIGNED[np.dtype(like.dtype).itemsize])
-    return lax.bitcast_convert_type(bits, like.dtype).reshape(like.shape)
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _pack(word, *leaves):
-    return jnp.concatenate([_to_words(x, word) for x in leaves] + [jnp.zeros(1, word)])
-
-
-@_pack.defjvp
-def _pack_jvp(word, primals, tangents):
-    raise TypeError("one_kernel: a packed constant is being differentiated, but constants reach the kernel as "
-                    "bit patterns (no derivative); differentiate outside the kernel or carry it in the state")
+def _unpack(v, like) -> jax.Array:
+    v = v.reshape(like.shape)
+    return v != 0 if like.dtype == jnp.bool_ else v.astype(like.dtype)
 
 
 def one_kernel(fn, consts, state):
@@ -161,14 +163,17 @@ def one_kernel(fn, consts, state):
     as one kernel (see the module docstring): for a region whose operations are many and
     small, such as a ``lax.while_loop`` of small solves.
 
-    ``consts`` reach the kernel packed into one buffer of words (a parameter the optimised program
-    leaves unused would abort XLA), except those of more than :data:`PACK_LIMIT` elements,
-    which ``fn`` must read (copying the foam square's 476 kB boundary compliance into the
-    buffer cost 0.3 ms of a 5 ms squeeze); the state leaves go as they are (each is an output,
-    so each is used). Every input must be an argument: a closed-over array would be a parameter of its
-    own. Weakly typed constants arrive strongly typed (same dtype: the library's models hold
-    one precision, so promotion inside ``fn`` does not change). ``fn`` is traced with
-    :func:`in_kernel` set. Off the CPU this is ``fn(consts, state)``.
+    ``consts`` reach the kernel packed by value into one vector of their float type (a
+    parameter the optimised program leaves unused would abort XLA; integer constants must be
+    exact in it: below 2**24 in float32, 2**53 in float64), except those of more than
+    :data:`PACK_LIMIT` elements, which ``fn`` must read (copying the foam square's 476 kB
+    boundary compliance into the vector cost 0.3 ms of a 5 ms squeeze); the state leaves go as
+    they are (each is an output, so each is used). Every input must be an argument: a
+    closed-over array would be a parameter of its own. Weakly typed constants arrive strongly
+    typed (same dtype: the library's models hold one precision, so promotion inside ``fn``
+    does not change). Forward-mode derivatives pass through constants and state alike; they
+    are computed by the region as ordinary operations, not in the kernel.
+    ``fn`` is traced with :func:`in_kernel` set. Off the CPU this is ``fn(consts, state)``.
     The caller's program must be compiled with :data:`NO_CUSTOM_FUSIONS` (:func:`can_fuse`):
     inside a user's ``jit`` XLA may form a custom fusion in the region, which then fails to
     compile (``UNIMPLEMENTED: Fusion kind not implemented on CPU``).
@@ -177,17 +182,18 @@ def one_kernel(fn, consts, state):
         return fn(consts, state)
     leaves, tree = jax.tree.flatten(consts)
     leaves = [jnp.asarray(x) for x in leaves]
-    word = jnp.uint64 if jax.config.jax_enable_x64 else jnp.uint32
-    packed = _pack(word, *[x for x in leaves if x.size <= PACK_LIMIT])
+    packed = _pack([x for x in leaves if x.size <= PACK_LIMIT])
     large = [x for x in leaves if x.size > PACK_LIMIT]
+
+    likes = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
 
     def region(buf, large, state):
         parts, at, big = [], 0, iter(large)
-        for x in leaves:
+        for x in likes:
             if x.size > PACK_LIMIT:
                 parts.append(next(big))
                 continue
-            parts.append(_from_words(lax.slice_in_dim(buf, at, at + x.size), x))
+            parts.append(_unpack(lax.slice_in_dim(buf, at, at + x.size), x))
             at += x.size
         new = fn(jax.tree.unflatten(tree, parts), state)
         if jax.tree.structure(new) != jax.tree.structure(state) or any(
@@ -195,10 +201,21 @@ def one_kernel(fn, consts, state):
             raise TypeError("one_kernel: fn must return a state of the structure, shapes and dtypes it was given")
         return new
 
-    with _tracing_kernel():
-        out = jax.jit(region)(packed, large, state)
-    from jax.experimental.xla_metadata import set_xla_metadata
-    return set_xla_metadata(out, inlineable="false", xla_cpu_small_call="true")
+    @jax.custom_jvp
+    def kernel(buf, large, state):
+        from jax.experimental.xla_metadata import set_xla_metadata
+        with _depth(_KERNEL):
+            out = jax.jit(region)(buf, large, state)
+        return set_xla_metadata(out, inlineable="false", xla_cpu_small_call="true")
+
+    @kernel.defjvp
+    def _(primals, tangents):     # derivatives: the region as ordinary operations (the jvp of a
+        with _depth(_KERNEL):     # kernel call can leave a tangent parameter unused)
+            return jax.jvp(region, primals, tangents)
+
+    # the barrier hides which inputs are constants: XLA would sink them into the kernel and
+    # leave its parameters unused (under vmap, a squeeze's whole initial state can be constant)
+    return kernel(*lax.optimization_barrier((packed, large, state)))
 
 
 def jit(fun=None, **jit_kwargs):
@@ -208,4 +225,5 @@ def jit(fun=None, **jit_kwargs):
     return TopLevelJit(fun, **jit_kwargs)
 
 
-__all__ = ["CPU_OPTIONS", "NO_CUSTOM_FUSIONS", "TopLevelJit", "can_fuse", "in_kernel", "jit", "one_kernel", "options"]
+__all__ = ["CPU_OPTIONS", "NO_CUSTOM_FUSIONS", "PACK_LIMIT", "TopLevelJit", "can_fuse", "in_kernel", "jit", "one_kernel",
+           "options", "top_level_trace"]

@@ -105,15 +105,17 @@ def test_gauss_jordan_solves_like_lapack_and_differentiates_alike():
     assert not np.all(np.isfinite(gauss_jordan(jnp.ones((3, 3)), jnp.ones(3))))
 
 
-def test_one_kernel_refuses_to_differentiate_its_packed_constants():
-    """Constants reach the kernel as bit patterns: a derivative through them would be zero,
-    so asking for one is an error; the state differentiates."""
-    if not compiler.can_fuse():
-        pytest.skip("one-kernel regions need the CPU backend and its options")
-
+def test_one_kernel_differentiates_through_constants_and_state():
+    """Constants are packed by value, so forward-mode derivatives pass through them (and
+    through the state) as through the plain function; integers and booleans come back exact."""
     def f(k, x0):
-        return compiler.one_kernel(lambda c, s: (s[0] * c, s[1] + 1), k, (x0, jnp.array(0)))[0]
-    with pytest.raises(TypeError, match="differentiated"):
-        jax.jvp(lambda k: f(k, 2.0 * jnp.ones(3)), (jnp.ones(3),), (jnp.ones(3),))
-    _, t = jax.jvp(lambda x: f(3.0 * jnp.ones(3), x), (jnp.ones(3),), (jnp.ones(3),))
-    np.testing.assert_allclose(t, 3.0)
+        def fn(c, s):
+            scale, n, on = c
+            return jnp.where(on, s[0] * scale, s[0]) + n, s[1] + 1
+        return compiler.one_kernel(fn, (k, jnp.int32(-7), jnp.array([True, False, True])), (x0, jnp.array(0)))[0]
+    x = 2.0 * jnp.ones(3)
+    np.testing.assert_allclose(f(3.0 * jnp.ones(3), x), [-1.0, -5.0, -1.0])
+    _, t = jax.jvp(lambda k: f(k, x), (3.0 * jnp.ones(3),), (jnp.ones(3),))
+    np.testing.assert_allclose(t, [2.0, 0.0, 2.0])
+    _, t = jax.jvp(lambda y: f(3.0 * jnp.ones(3), y), (x,), (jnp.ones(3),))
+    np.testing.assert_allclose(t, [3.0, 1.0, 3.0])

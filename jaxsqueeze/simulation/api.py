@@ -29,8 +29,10 @@ from .status import Status
 def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config:
     """The static configuration of a scene; its contact slots are ``Settings.slots`` (the
     automatic capacity of an ``eager`` squeeze starts smaller and grows, :func:`squeeze`).
-    ``Settings.fused`` holds for ``eager`` squeezes only, where :func:`_run` compiles at
-    the top level with the options a one-kernel loop needs."""
+    ``Settings.fused`` holds where the program is compiled at the top level with the options
+    a one-kernel loop needs: ``eager`` squeezes, and squeezes traced inside the library's own
+    top-level programs (:func:`jaxsqueeze.compiler.top_level_trace`: ``split_vmap``, the
+    planner); not inside a user's ``jit``/``vmap``/``jacfwd``."""
     s = scene.settings
     capacity = s.slots(len(scene.boundary_nodes()), eager)
     # every frictionless contact slides: without a sliding capacity it keeps both systems
@@ -41,7 +43,8 @@ def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config
                   max_steps=int(s.max_steps), max_events=int(s.max_events),
                   newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
                   placement=scene.placement is not None, adversary=scene.adversary is not None,
-                  history=history, fused=bool(eager and s.fused and compiler.can_fuse()))
+                  history=history,
+                  fused=bool(s.fused and compiler.can_fuse() and (eager or compiler.top_level_trace())))
 
 
 def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:

@@ -282,6 +282,29 @@ def test_fused_squeeze_is_the_same_squeeze_in_one_kernel(slanted):
     np.testing.assert_allclose(b.displacement, a.displacement, rtol=0, atol=1e-9 * np.abs(a.displacement).max())
 
 
+def test_fused_batch_inside_the_librarys_top_level_program(slanted):
+    """Inside a program the library compiles at the top level (compiler.jit: split_vmap, the
+    planner) a traced squeeze honours Settings.fused: a vmap over frictions runs one kernel
+    per member and equals the eager squeezes; forward-mode derivatives through it match central
+    differences (the kernel's jvp is the region as ordinary operations)."""
+    from jaxsqueeze import compiler
+    if not compiler.can_fuse():
+        pytest.skip("one-kernel loops need the CPU backend and its options")
+    small = dataclasses.replace(slanted.settings, capacity=32, sliding_capacity=8)
+    plain, fused = (slanted.replace(settings=dataclasses.replace(small, fused=f)) for f in (False, True))
+    op = slanted.operator()
+    mus = jnp.array([0.23, 0.3])
+    force = lambda sc, mu: jsq.squeeze(sc.replace(friction=mu), op=op, trim=False).grip_force  # noqa: E731
+    batch = compiler.jit(jax.vmap(lambda mu: force(fused, mu)))
+    assert 'inlineable="false"' in batch.lower(mus).compile().as_text()
+    want = [float(jsq.squeeze(plain.replace(friction=float(mu)), op=op).grip_force) for mu in mus]
+    np.testing.assert_allclose(batch(mus), want, rtol=1e-9)
+    slope = compiler.jit(jax.jacfwd(lambda mu: force(fused, mu)))(0.23)
+    h = 1e-6       # central difference of eager squeezes (the usual program, compiled above)
+    fd = [float(jsq.squeeze(plain.replace(friction=0.23 + k * h), op=op).grip_force) for k in (1, -1)]
+    np.testing.assert_allclose(slope, (fd[0] - fd[1]) / (2 * h), rtol=1e-6)
+
+
 def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monkeypatch):
     """Settings.capacity and sliding_capacity = None: an eager squeeze starts with EAGER_SLOTS
     contact slots and EAGER_SLIDING Newton slots and, when its contact set outgrows them,
