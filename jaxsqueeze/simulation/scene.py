@@ -154,15 +154,15 @@ class Settings:
     max_events: capacity of the event log, static.
     newton_iters: Newton iteration bound, static.
     bisect_iters: iteration bound for locating an event (regula falsi + bisection), static.
-    fused: compile an eager squeeze's loop into one CPU kernel (static; default False):
-        the same result, each squeeze ~40 % faster (the foam square: 4.6 against 7.8 ms) for
-        ~2.4 s more compile (5.5 against 3.1 s), which pays off from a few hundred squeezes of
-        one object or with the persistent compilation cache. Honoured wherever the library
-        compiles the program itself (eager squeezes, :func:`~jaxsqueeze.batch.split_vmap`
-        batches, the planner's maps and searches; forward-mode derivatives there are computed
-        outside the kernel); ignored inside your own ``jit``, ``vmap`` or ``jacfwd`` (the
-        program is then yours, compiled without the options a kernel needs) and off the CPU
-        (:func:`jaxsqueeze.compiler.one_kernel`).
+    fused: compile the squeeze loop into one CPU kernel (static; default False): the same
+        result, each squeeze ~40 % faster (the foam square: 4.5–4.8 against 7.3–7.7 ms) for
+        ~2.4 s more compile (5.6 against 3.1 s), which pays off from a few hundred squeezes
+        of one object or with the persistent compilation cache. Honoured wherever the
+        library compiles the program itself (eager squeezes,
+        :func:`~jaxsqueeze.batch.split_vmap` batches, the planner's maps and searches;
+        forward-mode derivatives there are computed outside the kernel); ignored inside your
+        own ``jit``, ``vmap`` or ``jacfwd`` (the program is then yours, compiled without the
+        options a kernel needs) and off the CPU (:func:`jaxsqueeze.compiler.one_kernel`).
 
     A pytree: the four tolerances are leaves (None = the default), the integers are static
     (a changed capacity compiles a new program; a changed tolerance does not).
