@@ -1,4 +1,5 @@
 """Grasp planning (DESIGN 2.9): continuous placement, qualities, maps and search."""
+import dataclasses
 import os
 
 import jax
@@ -135,6 +136,11 @@ def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
     cands = plan.candidate_pairs(ellipse, spacing=P / 12)
     assert len(cands) > 0
     assert np.all(plan.evaluate(ellipse, cands[:2], progress=False).margin >= 0)
+    # Settings(fused=True): the planner's own programs run each squeeze loop as one kernel
+    fused = ellipse.replace(settings=dataclasses.replace(ellipse.settings, fused=True))
+    f = plan.evaluate(fused, X, batch="vmap", chunk=3, progress=False)
+    np.testing.assert_array_equal(f.status, s.status)
+    np.testing.assert_allclose(f.quality, s.quality, rtol=1e-9)
 
 
 def test_a_placed_fingertip_is_judged_by_its_own_cone():
