@@ -168,7 +168,8 @@ def test_scene_file_capacities_reach_the_settings():
     s = scenefile.load_text(base.replace("capacity = 64", "capacity = 40\nsliding_capacity = 12")).scene.settings
     assert (s.capacity, s.sliding_capacity) == (40, 12)
     s = scenefile.load_text(base.replace("capacity = 64\n", "")).scene.settings
-    assert (s.capacity, s.sliding_capacity) == (None, None)
+    assert (s.capacity, s.sliding_capacity, s.fused) == (None, None, False)
+    assert scenefile.load_text(base.replace("capacity = 64", "capacity = 64\nfused = true")).scene.settings.fused
 
 
 def test_example_scene_reads_mesh_file():
@@ -223,6 +224,7 @@ BAD = {
     "zero capacity": ("accuracy.capacity", lambda s: s.replace("capacity = 64", "capacity = 0")),
     "float capacity": ("accuracy.capacity", lambda s: s.replace("capacity = 64", "capacity = 6.4")),
     "zero sliding capacity": ("accuracy.sliding_capacity", lambda s: s.replace("capacity = 64", "capacity = 64\nsliding_capacity = 0")),
+    "fused not a boolean": ("accuracy.fused", lambda s: s.replace("capacity = 64", 'capacity = 64\nfused = "yes"')),
     "bad friction model": ("squeeze.friction_model", lambda s: s.replace("friction = 0.3", 'friction = 0.3\nfriction_model = "viscous"')),
     "not toml": ("file", lambda s: s.replace("[material]", "[material")),
     "mesh file missing": ("object.mesh_file", lambda s: s.replace(
