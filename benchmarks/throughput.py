@@ -427,26 +427,15 @@ def main(argv=None):
                 mean_rows=r[1]["mean_rows"], success=r[1]["success"],
                 ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["vmap"])
         if B > 1:
-            r, to = sub(["split", B, a.reps], a.vmap_timeout)
-            if len(r) >= 2:
-                rec("batch", f"batch.split_vmap over {r[0]['devices']} host devices (one per core)", batch=B,
-                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
-                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], success=r[1]["success"],
-                    ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])
-            r, to = sub(["split", B, a.reps, "eager"], a.vmap_timeout)
-            if len(r) >= 2:
-                rec("batch", f"batch.split_vmap over {r[0]['devices']} host devices, the eager capacities "
-                    "(32 slots, 8 sliding)", batch=B,
-                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
-                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], success=r[1]["success"],
-                    ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])
-            r, to = sub(["split", B, a.reps, "fused"], a.vmap_timeout)
-            if len(r) >= 2:
-                rec("batch", f"batch.split_vmap over {r[0]['devices']} host devices, the loop as one kernel "
-                    "(Settings.fused, eager capacities: 32 slots, 8 sliding)", batch=B,
-                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
-                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], success=r[1]["success"],
-                    ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])
+            for variant, what in ((), " (one per core)"), (("eager",), ", the eager capacities (32 slots, 8 sliding)"), (
+                    ("fused",), ", the loop as one kernel (Settings.fused, eager capacities: 32 slots, 8 sliding)"):
+                r, to = sub(["split", B, a.reps, *variant], a.vmap_timeout)
+                if len(r) >= 2:
+                    rec("batch", f"batch.split_vmap over {r[0]['devices']} host devices{what}",
+                        batch=B, compile_s=r[0]["compile_s"], seconds=r[1]["run_s"],
+                        per_grasp_ms=1e3 * r[1]["run_s"] / B, evals_per_min=60 * B / r[1]["run_s"],
+                        max_rows=r[1]["max_rows"], success=r[1]["success"],
+                        ratio_to_loop=(r[1]["run_s"] / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])
             with tempfile.TemporaryDirectory() as tmp:
                 t = time.perf_counter()
                 outs = map_scenes(T.evaluate_grip, list(q), processes=a.processes, cache=tmp, progress=False)
