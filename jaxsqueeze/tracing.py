@@ -10,6 +10,17 @@ def is_concrete(x) -> bool:
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(x))
 
 
+def as_array(x, dtype=None) -> jax.Array:
+    """``x`` as a JAX array of ``dtype`` (default: its own, canonicalized: 64-bit types become
+    32-bit ones unless x64 is on). A host value (Python number, numpy array) is transferred as
+    it is: ``jnp.asarray`` of one compiles a small program per shape and dtype, which a first
+    squeeze paid about a dozen times. A tracer is converted in its trace."""
+    if is_concrete(x) and not isinstance(x, jax.Array):
+        a = np.asarray(x, dtype)
+        return jax.device_put(a.astype(jax.dtypes.canonicalize_dtype(a.dtype), copy=False))
+    return jax.numpy.asarray(x, dtype)
+
+
 def reverse_mode(x) -> bool:
     """True if any leaf of ``x`` is being differentiated in reverse mode (``jax.grad``,
     ``jax.vjp``, ``jax.jacrev``, ``jax.linearize``), also through ``vmap``/``jit`` tracers

@@ -60,12 +60,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-import jax.numpy as jnp
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from ..geometry.boundary import crossing
 from ..geometry.curves import arclength_params
+from ..tracing import as_array
 from .operator import Compliance, FieldMap, rigid_modes
 
 NQ = 5                                                  # Gauss points per element
@@ -340,8 +340,8 @@ def band_compliance(band: Band, E: float, dtype=None) -> Compliance:
     G = 0.5 * (G + G.T)
     L = float(np.max(np.ptp(band.points, axis=0)))
     pts = (band.points - band.points.mean(axis=0)) / L
-    arr = lambda a: jnp.asarray(a, dtype)   # noqa: E731
+    arr = lambda a: as_array(a, dtype)   # noqa: E731
     return Compliance(
-        points=arr(pts), normals=arr(band.normals), G=arr(G), N=rigid_modes(arr(pts)),
-        length=arr(L), stiffness=arr(E * band.height), nodes=jnp.arange(band.m),
+        points=arr(pts), normals=arr(band.normals), G=arr(G), N=arr(rigid_modes(pts, xp=np)),
+        length=arr(L), stiffness=arr(E * band.height), nodes=as_array(np.arange(band.m)),
         method="band", loops=(band.m,), field=FieldMap(lambda f, G=G: G @ f, pts))

@@ -18,12 +18,17 @@ from threadpoolctl import threadpool_limits
 
 from .material import Material
 from ..geometry.mesh import Mesh
+from ..tracing import as_array
 from .operator import Compliance, FieldMap, rigid_modes
 
 METHODS = ("sparse", "dense", "spectral")
 
 
 # ----------------------------------------------------------------------------- element kernel
+_D0 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 0.5))     # the plane-stress D: _D0 + ν _D1
+_D1 = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -0.5))
+
+
 def element_stiffness(xy: jax.Array, nu) -> jax.Array:
     """Plane-stress CST stiffness (6, 6) of one triangle for E = 1, thickness = 1.
 
@@ -37,13 +42,14 @@ def element_stiffness(xy: jax.Array, nu) -> jax.Array:
     b = jnp.array([y[1] - y[2], y[2] - y[0], y[0] - y[1]])
     c = jnp.array([x[2] - x[1], x[0] - x[2], x[1] - x[0]])
     area = 0.5 * (b[0] * c[1] - b[1] * c[0])
-    z = jnp.zeros(3, xy.dtype)
+    z = 0.0 * b      # (not zeros_like: a value that depends on no input is evaluated eagerly at compile time)
     Bm = jnp.stack([
         jnp.stack([b, z], 1).reshape(6),
         jnp.stack([z, c], 1).reshape(6),
         jnp.stack([c, b], 1).reshape(6),
     ]) / (2 * area)
-    D = jnp.array([[1.0, nu, 0.0], [nu, 1.0, 0.0], [0.0, 0.0, 0.5 * (1 - nu)]], xy.dtype) / (1 - nu**2)
+    # D = [[1, ν, 0], [ν, 1, 0], [0, 0, (1 − ν)/2]] / (1 − ν²) from numpy constants, for the same reason
+    D = (np.array(_D0, xy.dtype) + nu * np.array(_D1, xy.dtype)) / (1 - nu**2)
     return area * Bm.T @ D @ Bm
 
 
@@ -90,7 +96,7 @@ def null_space(points) -> jax.Array:
 def scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
     """The stiffness matrix K (2n, 2n) as a scipy CSC matrix in float64 (the host-side build)."""
     with jax.enable_x64(True):   # the host-side build is always float64
-        ke = np.asarray(element_matrices(jnp.asarray(mesh.points, jnp.float64), jnp.asarray(mesh.triangles), nu))
+        ke = np.asarray(element_matrices(np.asarray(mesh.points, np.float64), np.asarray(mesh.triangles), nu))
     rows, cols = _coo(mesh.triangles)
     return sp.csc_matrix((ke.ravel(), (rows, cols)), shape=(2 * mesh.n, 2 * mesh.n))
 
@@ -139,11 +145,11 @@ def compliance(mesh: Mesh, material: Material, method: str = "sparse") -> Compli
         Gnb = build(jnp.asarray(pts), jnp.asarray(mesh.triangles), material.nu, jnp.asarray(bdofs), jnp.asarray(pins))
         G = Gnb[bdofs]
         fmap = None if isinstance(Gnb, jax.core.Tracer) else _matrix_field(np.asarray(Gnb), pts)
-    dt = jnp.asarray(G).dtype
+    dt = jax.dtypes.canonicalize_dtype(G.dtype)     # (float32 unless x64 is on)
     return Compliance(
-        points=jnp.asarray(pts[b], dt), normals=jnp.asarray(mesh.normals, dt), G=jnp.asarray(G),
-        N=rigid_modes(jnp.asarray(pts[b], dt)), length=jnp.asarray(L, dt),
-        stiffness=jnp.asarray(material.E * material.thickness, dt), nodes=jnp.asarray(b),
+        points=as_array(pts[b], dt), normals=as_array(mesh.normals, dt), G=as_array(G, dt),
+        N=as_array(rigid_modes(pts[b], xp=np), dt), length=as_array(L, dt),
+        stiffness=as_array(material.E * material.thickness, dt), nodes=as_array(b),
         method=method, loops=tuple(mesh.loops), field=fmap)
 
 

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..tracing import is_concrete
+from ..tracing import as_array, is_concrete
 
 
 class FieldMap:
@@ -114,7 +114,7 @@ def field_displacement(op: Compliance, f_hat: jax.Array, g: jax.Array) -> jax.Ar
     if is_concrete((f_hat, g)) and np.ndim(f_hat) == 1:   # eager: the host solve (a callback compiles per call)
         fmap = op.field
         u = fmap.solve(np.asarray(f_hat, np.float64)) + rigid_modes(fmap.points, xp=np) @ np.asarray(g, np.float64)
-        return jnp.asarray(u.reshape(-1, 2), dtype=jnp.result_type(f_hat))
+        return as_array(u.reshape(-1, 2), jnp.result_type(f_hat))
     return _field(op.field, f_hat, g)
 
 

@@ -321,11 +321,11 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     if op.field is None:
         raise ValueError("the compliance operator has no field map; cannot rebuild the full field")
     r = row_index(res, row)
-    L, Fs = float(op.length), float(op.force_scale)
+    L, Fs = float(op.length), float(op.stiffness) * float(op.length)     # the force scale E h L [N]
     f_hat = np.asarray(res.forces[r], float).reshape(-1) / Fs
     u = np.asarray(op.field.solve(f_hat), float).reshape(-1, 2) * L
     g = np.asarray(res.rigid[r], float) / [L, L, 1.0]                 # scaled: (t_x / L, t_y / L, rotation)
-    N_all = np.asarray(rigid_modes(op.field.points))
+    N_all = rigid_modes(np.asarray(op.field.points), xp=np)
     return u + (N_all @ g).reshape(-1, 2) * L
 
 

@@ -17,7 +17,7 @@ from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..tracing import is_concrete, reverse_mode
+from ..tracing import as_array, is_concrete, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
 from .scene import Scene
@@ -56,10 +56,10 @@ def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:
     rules evaluated in numpy)."""
     dt = op.G.dtype
     f64 = dt == jnp.float64
-    L = op.length
     # eager (validated) numbers stay numpy until the compiled call takes them: a device array
     # per number would cost ~50 µs each
     xp = np if validated else jnp
+    L = xp.asarray(op.length)
     s = scene.settings
     depth = xp.asarray(scene.depth, dt)
     step = xp.asarray(s.step, dt) if s.step is not None else depth / 50
@@ -265,7 +265,9 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         cfg = bigger
         res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     if op.field is not None:
-        res = dataclasses.replace(res, displacement=field_displacement(op, F_hat, g_hat) * op.length)
+        u = field_displacement(op, F_hat, g_hat)
+        u = as_array(np.asarray(u) * np.asarray(op.length), u.dtype) if is_concrete(u) else u * op.length
+        res = dataclasses.replace(res, displacement=u)
     if trim and np.ndim(res.count) == 0 and is_concrete(res):   # eager, unbatched
         res = trim_result(res)
     if throw:

@@ -10,7 +10,7 @@ import jax
 import numpy as np
 
 from ..mechanics.material import Material
-from ..tracing import is_concrete, numeric
+from ..tracing import as_array, is_concrete, numeric
 from .laws import CONTACT_MODELS, FRICTION_MODELS
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
@@ -376,7 +376,7 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
                 per.pop(next(iter(per)))
             per[key] = op
     h = material.thickness if solid else obj.height
-    return dataclasses.replace(op, stiffness=jax.numpy.asarray(material.E * h, op.G.dtype))
+    return dataclasses.replace(op, stiffness=as_array(material.E * h, op.G.dtype))
 
 
 def boundary_curve(obj) -> "boundary.Curve":

@@ -517,3 +517,26 @@ def test_field_displacement_eager_equals_traced():
     traced = jax.jit(lambda f, gg: field_displacement(op, f, gg))(f_hat, g)
     assert eager.shape == (mesh_of("annulus").n, 2)
     np.testing.assert_allclose(eager, traced, rtol=0, atol=1e-13 * float(jnp.abs(traced).max()))
+
+
+def test_operator_builds_compile_only_the_element_kernel():
+    """Operators of objects of new sizes (a mesh and a band) compile at most the jitted element
+    kernel (for a new triangle count): their host arrays reach the device as they are, not
+    through ``jnp.asarray`` and eager ``jnp`` calls, which compiled a small program per shape
+    (about a dozen, 0.3 s, on every first squeeze of an object of a new size)."""
+    from jaxsqueeze.geometry import curves
+    from jaxsqueeze.mechanics.band import Band, band_compliance
+    compiled = []
+    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        op = fem.compliance(shapes.polygon(L_SHAPE, max_edge=0.0137), MAT, "sparse")   # sizes no other test builds
+        band = band_compliance(Band.from_function(curves.circle(0.03), 37), 1e9)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert len(compiled) <= 1
+    for o in (op, band):
+        assert all(isinstance(a, jax.Array) for a in (o.points, o.normals, o.G, o.N, o.length, o.stiffness, o.nodes))
+        assert o.G.dtype == o.N.dtype == o.points.dtype == o.length.dtype == jnp.float64 and o.nodes.dtype == jnp.int64
+        np.testing.assert_array_equal(o.N, fem.rigid_modes(o.points))
+    assert float(op.stiffness) == MAT.E * MAT.thickness
