@@ -93,10 +93,20 @@ def null_space(points) -> jax.Array:
     return w / jnp.linalg.norm(w, axis=0)
 
 
+_corner_matrices = jax.jit(jax.vmap(element_stiffness, in_axes=(0, None)))   # (t, 3, 2) corners -> (t, 6, 6)
+
+
 def scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
-    """The stiffness matrix K (2n, 2n) as a scipy CSC matrix in float64 (the host-side build)."""
+    """The stiffness matrix K (2n, 2n) as a scipy CSC matrix in float64 (the host-side build).
+
+    The element kernel runs on the triangles' corners padded to a power of two (at least 256),
+    so meshes of many sizes share a few compiled kernels (each new size cost 0.1 s to compile)."""
+    xy = np.asarray(mesh.points, np.float64)[np.asarray(mesh.triangles)]
+    t = xy.shape[0]
+    pad = max(256, 1 << (t - 1).bit_length())
+    xy = np.concatenate([xy, np.broadcast_to(xy[:1], (pad - t, 3, 2))])    # copies of a real triangle
     with jax.enable_x64(True):   # the host-side build is always float64
-        ke = np.asarray(element_matrices(np.asarray(mesh.points, np.float64), np.asarray(mesh.triangles), nu))
+        ke = np.asarray(_corner_matrices(xy, nu))[:t]
     rows, cols = _coo(mesh.triangles)
     return sp.csc_matrix((ke.ravel(), (rows, cols)), shape=(2 * mesh.n, 2 * mesh.n))
 
