@@ -12,7 +12,9 @@ stick/slip, 15 mm, float64), in one run:
   ``contacts.solve`` there; the ratios of the engine's ``contacts.solve`` and of its time per recorded row to it.
 * ``compile``: trace + lower + compile of the squeeze in a fresh process without the
   persistent cache (cold), and in two fresh processes sharing a new cache folder (the second
-  one loads it: warm), with the cache hits JAX reports.
+  one loads it: warm), with the cache hits JAX reports; and a user's whole first
+  ``jsq.squeeze`` of the scene in a fresh process (operator build to result), with the
+  number of programs it compiled.
 * ``batch`` on the CPU for ``--batches`` (1/16/64/256) candidate grips: a plain loop of
   ``jsq.squeeze`` (up to ``--loop-max``), ``jax.vmap`` of the core in a fresh process (stopped
   after ``--vmap-timeout`` s and then reported as a bound), and :func:`jaxsqueeze.batch.map_scenes`
@@ -222,6 +224,15 @@ def worker(argv):
         t3 = time.perf_counter()
         print(json.dumps(dict(setup_s=t1 - t0, trace_lower_s=t2 - t1, compile_s=t3 - t2,
                               cache_hits=events.get("/jax/compilation_cache/cache_hits", 0))), flush=True)
+    elif kind == "first":       # first: a user's first jsq.squeeze of the scene in a fresh process
+        events = []
+        jax.monitoring.register_event_duration_secs_listener(
+            lambda name, secs, **kw: events.append(name) if name.endswith("backend_compile_duration") else None)
+        import jaxsqueeze as jsq
+        from squeeze import foam
+        t0 = time.perf_counter()
+        res = jsq.squeeze(foam())       # the operator build, validation, compile, run, field, trim
+        print(json.dumps(dict(first_s=time.perf_counter() - t0, programs=len(events), rows=int(res.count))), flush=True)
     elif kind in ("vmap", "split"):        # vmap B [reps] / split B [reps [eager | fused]]
         import jax.numpy as jnp
 
@@ -392,6 +403,10 @@ def main(argv=None):
         if r:
             rec("compile", "cold, fresh process, the loop as one kernel (Settings.fused)",
                 seconds=r[0]["trace_lower_s"] + r[0]["compile_s"], **r[0])
+        r, _ = sub(["first"], 300)
+        if r:
+            rec("compile", f"first jsq.squeeze in a fresh process: operator build, validation, {r[0]['programs']} "
+                "compiled programs, the squeeze and its field", seconds=r[0]["first_s"], rows=r[0]["rows"])
     with tempfile.TemporaryDirectory() as tmp:
         r1, _ = sub(["compile", tmp], 300)
         r2, _ = sub(["compile", tmp], 300)
