@@ -27,7 +27,7 @@ stick/slip, 15 mm, float64), in one run:
 Every row records the 1-minute load average. Writes ``results/throughput.csv`` and
 ``results/throughput.png`` (``throughput_quick.*`` with ``--quick``).
 
-    .venv/bin/python benchmarks/throughput.py            # ~10 min on 2 idle cores (3x under load)
+    .venv/bin/python benchmarks/throughput.py            # ~4 min on 2 idle cores (3x under load)
     .venv/bin/python benchmarks/throughput.py --quick    # smoke run: ~1.5 min idle
 """
 from __future__ import annotations
