@@ -53,10 +53,14 @@ def element_stiffness(xy: jax.Array, nu) -> jax.Array:
     return area * Bm.T @ D @ Bm
 
 
+#: element stiffnesses (t, 6, 6) from the triangles' corners (t, 3, 2), lifted from the kernel
+corner_matrices = jax.jit(jax.vmap(element_stiffness, in_axes=(0, None)))
+
+
 @jax.jit
 def element_matrices(points: jax.Array, triangles: jax.Array, nu) -> jax.Array:
-    """All element stiffnesses (t, 6, 6) for E = 1, thickness = 1, lifted from the kernel."""
-    return jax.vmap(element_stiffness, in_axes=(0, None))(points[triangles], nu)
+    """All element stiffnesses (t, 6, 6) for E = 1, thickness = 1."""
+    return corner_matrices(points[triangles], nu)
 
 
 def element_dofs(triangles) -> np.ndarray:
@@ -93,9 +97,6 @@ def null_space(points) -> jax.Array:
     return w / jnp.linalg.norm(w, axis=0)
 
 
-_corner_matrices = jax.jit(jax.vmap(element_stiffness, in_axes=(0, None)))   # (t, 3, 2) corners -> (t, 6, 6)
-
-
 def scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
     """The stiffness matrix K (2n, 2n) as a scipy CSC matrix in float64 (the host-side build).
 
@@ -106,7 +107,7 @@ def scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
     pad = max(256, 1 << (t - 1).bit_length())
     xy = np.concatenate([xy, np.broadcast_to(xy[:1], (pad - t, 3, 2))])    # copies of a real triangle
     with jax.enable_x64(True):   # the host-side build is always float64
-        ke = np.asarray(_corner_matrices(xy, nu))[:t]
+        ke = np.asarray(corner_matrices(xy, nu))[:t]
     rows, cols = _coo(mesh.triangles)
     return sp.csc_matrix((ke.ravel(), (rows, cols)), shape=(2 * mesh.n, 2 * mesh.n))
 
