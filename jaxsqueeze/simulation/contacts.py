@@ -397,9 +397,12 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
         def angles(x, v):
             return put(x, v.theta0)
 
-        def system(x, m, sl, v, dd, Psel, K, eps, hold):
-            """(R (Q,), J (Q, Q)) of system S at the unknowns x."""
-            th = angles(x, v)
+        @jax.jit     # traced once: the Newton loop, the implicit step and the rates reuse it
+        def system(x, m, sl, v, dd, Psel, K, eps, hold, ix):
+            """(R (Q,), J (Q, Q)) of system S at the unknowns x; ix = (sel, mask, back, on)."""
+            sel, mask, back, on = ix
+            take = lambda a: jnp.take(a, sel, axis=0, mode="clip")  # noqa: E731
+            th = _gather(back, on)(x, v.theta0)
             C = m.centres(dd)[v.finger]
             r = m.r[v.finger]
             a = m.angles(dd)[v.finger]
@@ -424,7 +427,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             return R, jnp.where(mask[:, None], J, 0.0) + jnp.diag(jnp.where(mask, 0.0, 1.0))
 
         Psel = _block_form(sl, sel)
-        args = (model, sl, v, d, Psel, K, eps, hold)
+        args = (model, sl, v, d, Psel, K, eps, hold, (sel, mask, back, on))
         consts = lax.stop_gradient(args)
         tol = consts[0].newton_tol
 
