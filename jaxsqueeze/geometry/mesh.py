@@ -120,7 +120,10 @@ def _few(items, k: int = 8) -> str:
 
 def _check_arrays(points, triangles):
     """Shapes, finiteness and index range; returns float64 (n, 2) and int64 (t, 3)."""
-    pts = np.asarray(points, dtype=np.float64)
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"points must be an (n, 2) array of numbers (x, y per node [m]); got {points!r:.60}: {e}") from None
     tri = np.asarray(triangles)
     if pts.size == 0 or tri.size == 0:
         raise ValueError(f"empty mesh: points {pts.shape}, triangles {tri.shape}; "
@@ -379,7 +382,7 @@ def read_mesh(path) -> Mesh:
         xy = pts[:, :2]
         finite = xy[np.all(np.isfinite(xy), axis=1)]
         scale = float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
-        bad = np.flatnonzero(np.abs(pts[:, 2]) > 1e-9 * max(scale, 1e-300))
+        bad = np.flatnonzero(~(np.abs(pts[:, 2]) <= 1e-9 * max(scale, 1e-300)))     # NaN z too
         if bad.size:
             raise ValueError(f"mesh in {path} is not planar: nodes {_few(bad)} have z = "
                              f"{_few(pts[bad, 2])} (must be 0); jaxsqueeze needs meshes in the z = 0 plane")

@@ -161,6 +161,7 @@ def compliance(mesh: Mesh, material: Material, method: str = "sparse") -> Compli
         points=as_array(pts[b], dt), normals=as_array(mesh.normals, dt), G=as_array(G, dt),
         N=as_array(rigid_modes(pts[b], xp=np), dt), length=as_array(L, dt),
         stiffness=as_array(material.E * material.thickness, dt), nodes=as_array(b),
+        nu=as_array(material.nu, dt),
         method=method, loops=tuple(mesh.loops), field=fmap)
 
 

@@ -67,6 +67,7 @@ class Compliance:
         length: () object length L [m].
         stiffness: () E * thickness [N/m]; forces scale as ``stiffness * length`` [N].
         nodes: (m,) int, index of each contact-capable node among the object's nodes.
+        nu: () Poisson's ratio the solid's G was built for (None for a band, which has none).
         method: static, name of the build ("spectral", "dense", "sparse", "band").
         loops: static, lengths of the boundary loops (outer first), summing to m.
         field: static, a :class:`FieldMap` for displacements of all nodes, or None.
@@ -79,6 +80,7 @@ class Compliance:
     length: jax.Array
     stiffness: jax.Array
     nodes: jax.Array
+    nu: jax.Array | None = None
     method: str = field(metadata=dict(static=True), default="dense")
     loops: tuple = field(metadata=dict(static=True), default=())
     field: FieldMap | None = field(metadata=dict(static=True), default=None, compare=False)

@@ -20,7 +20,7 @@ from .. import compiler
 from ..tracing import as_array, is_concrete, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
-from .scene import Scene
+from .scene import Scene, stiffness_of
 from .status import Status
 
 
@@ -104,6 +104,7 @@ def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
               "settings.event_tol": grasp.event_tol, "settings.newton_tol": grasp.newton_tol,
               "settings.gap_tol": grasp.gap_tol, "fingers.rotation": grasp.rotation}
     values["eps"] = float(jnp.finfo(op.G.dtype).eps)
+    values["size"] = op.length
     if not isinstance(scene.mesh, Mesh):
         values.pop("material.nu")                      # a band has no ν
     if scene.placement is None:
@@ -240,6 +241,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     Eagerly, invalid input raises ``ValueError`` naming every bad field; under tracing it
     gives ``Status.INVALID_INPUT`` with ``result.invalid`` naming the field.
     """
+    check_types(scene, op)
     if reverse_mode((scene, op)):
         raise TypeError(REVERSE_MODE)
     concrete = is_concrete(scene)
@@ -247,7 +249,15 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         bad = validate.shape_problems(scene) or validate.scene_cost_problems(scene)
         if bad:
             raise ValueError("\n".join(bad))
-    op = scene.operator() if op is None else op
+    if op is None:
+        op = scene.operator()
+    else:
+        if is_concrete((scene.material.nu, op)):
+            check_operator(scene, op)
+        # E and the thickness are the scene's: they only scale the operator (and carry its derivatives)
+        op = dataclasses.replace(op, stiffness=stiffness_of(scene.mesh, scene.material, op.G.dtype))
+    if concrete:
+        check_force_scale(op)
     if concrete and scene.placement is None:
         check_grip(scene, op)
     cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)
@@ -273,6 +283,62 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     if throw:
         res.raise_for_status()
     return res
+
+
+def check_types(scene, op) -> None:
+    """Raise ``TypeError`` unless ``scene`` is a :class:`Scene` of the library's types and ``op``
+    is None or a :class:`Compliance`."""
+    from ..mechanics.band import Band
+    from ..mechanics.material import Material
+    from .scene import Fingers, Settings
+    if not isinstance(scene, Scene):
+        raise TypeError(f"squeeze takes a jsq.Scene, got {type(scene).__name__}: build one with "
+                        "jsq.Scene(mesh=..., material=jsq.Material(...), fingers=jsq.Fingers(...), grip=...)")
+    for name, kinds in (("mesh", (Mesh, Band)), ("material", Material), ("fingers", Fingers), ("settings", Settings)):
+        value = getattr(scene, name)
+        if not isinstance(value, kinds):
+            want = " or ".join(f"jsq.{k.__name__}" for k in (kinds if isinstance(kinds, tuple) else (kinds,)))
+            raise TypeError(f"Scene.{name} must be a {want}, got {type(value).__name__} ({value!r:.60})")
+    if scene.grip is not None and not is_concrete(scene.grip):     # traced: its dtype is all there is to check
+        kinds = {jnp.result_type(g).kind for g in jax.tree.leaves(scene.grip)}
+        if not kinds <= {"i", "u"}:
+            raise TypeError(f"Scene.grip must be integer node indices, got a traced {sorted(kinds)} array: pass "
+                            "int32 indices (for a continuous position use jsq.Placement)")
+    if op is not None and not isinstance(op, Compliance):
+        raise TypeError(f"op must be the scene's compliance operator (op = scene.operator()) or None, "
+                        f"got {type(op).__name__} ({op!r:.60})")
+
+
+def check_operator(scene: Scene, op: Compliance) -> None:
+    """Raise ``ValueError`` unless ``op`` was built for the scene's object (its boundary nodes
+    and their positions) and ν: a compliance operator fixes both (E and the thickness are
+    taken from the scene)."""
+    nodes = np.asarray(scene.boundary_nodes())
+    fix = "build it from this scene (op = scene.operator()) or omit op"
+    if op.m != len(nodes) or not np.array_equal(np.asarray(op.nodes), nodes):
+        raise ValueError(f"op was built for another object: its {op.m} contact-capable nodes are not this scene's "
+                         f"{len(nodes)} boundary nodes; {fix}.")
+    pts = np.asarray(validate.boundary_points(scene.mesh), float)
+    L = float(op.length)
+    tol = 100 * float(np.finfo(op.G.dtype).eps) * L
+    if not np.allclose(np.asarray(op.points, float) * L, pts, rtol=0.0, atol=tol):
+        raise ValueError(f"op was built for another object: its node positions differ from this scene's mesh; {fix}.")
+    if op.nu is not None and scene.mesh.__class__ is Mesh:
+        nu, op_nu = float(scene.material.nu), float(op.nu)
+        if abs(nu - op_nu) > 1e3 * float(np.finfo(op.G.dtype).eps):
+            raise ValueError(f"op was built for nu = {op_nu:g}, but the scene's material has nu = {nu:g}; {fix} "
+                             "(a given op fixes nu: E and the thickness are taken from the scene).")
+
+
+def check_force_scale(op: Compliance) -> None:
+    """Raise ``ValueError`` when forces of the scale E h L [N] would overflow the operator's
+    precision: (1000 E h L)², what a force's magnitude squares, must stay finite."""
+    dt = np.dtype(op.G.dtype)
+    scale = float(np.asarray(op.stiffness, dt) * np.asarray(op.length, dt))
+    if not 1e3 * scale < float(np.sqrt(np.finfo(dt).max)):
+        raise ValueError(f"the force scale E * thickness * size = {scale:.3g} N is too large for {dt.name} (forces "
+                         f"are squared in magnitudes, largest {float(np.finfo(dt).max):.3g}): check the units of E (Pa) and the thickness (m), or "
+                         "compute in float64 (jax.config.update('jax_enable_x64', True)).")
 
 
 def check_grip(scene: Scene, op: Compliance) -> None:

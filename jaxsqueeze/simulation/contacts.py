@@ -188,17 +188,18 @@ def update(op: Compliance, sl: Slots, old_on, new_on):
         # each stage returns the new (node, slot, Minv), the slot k whose compliance columns
         # change and their new values; Gc itself (2m × 2S) is written after the switch, in
         # place: a stage returning it would copy it on every stage
-        same = (sl.node, sl.slot, sl.Minv, jnp.asarray(0, jnp.int_), lax.dynamic_slice_in_dim(sl.Gc, 0, 2, axis=1))
+        ix = jax.dtypes.canonicalize_dtype(jnp.int_)    # the index type of Python ints (int32 without x64)
+        same = (sl.node, sl.slot, sl.Minv, jnp.asarray(0, ix), lax.dynamic_slice_in_dim(sl.Gc, 0, 2, axis=1))
 
         def drop():
             p = jnp.argmax(leave)
-            k = sl.slot[p].astype(jnp.int_)
+            k = sl.slot[p].astype(ix)
             node, slot, Minv, cols = _deactivated(sl, k)
             return (node, slot, Minv, k, cols), leave.at[p].set(False), join, over, todo, fresh
 
         def add():
             p = jnp.argmax(join)
-            k = jnp.argmax(sl.node < 0).astype(jnp.int_)
+            k = jnp.argmax(sl.node < 0).astype(ix)
             node, slot, Minv, cols = _activated(op, sl, k, p)
             return (node, slot, Minv, k, cols), leave, join.at[p].set(False), over, todo, fresh
 

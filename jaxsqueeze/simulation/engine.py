@@ -527,8 +527,9 @@ def finish(model: Model, st: State, ok) -> State:
     """Record the row and decide the status: the one place where a status is set.
 
     Precedence: a structural fault raised by a stage (invalid input, infeasible grip,
-    overflow, event-log overflow, stall), then non-finite values, Newton failure, a finger
-    without contact, a finger whose contacts all slide, the target depth, the step bound.
+    overflow, event-log overflow, stall), then a finger without contact (the solve of such a
+    set is singular, so its non-finite values are a consequence, not the cause), non-finite
+    values, Newton failure, a finger whose contacts all slide, the target depth, the step bound.
     """
     st = _record(model, st)
     count = st.count + 1
@@ -537,9 +538,9 @@ def finish(model: Model, st: State, ok) -> State:
     lost = jnp.any(per == 0)
     slip = jnp.any(slid == per) if model.cfg.slip_events else jnp.array(False)
     status = jnp.where(st.fault != RUNNING, st.fault,
+             jnp.where(lost, Status.LOST_CONTACT,
              jnp.where(~finite, Status.NONFINITE,
              jnp.where(~ok, Status.NEWTON_FAILURE,
-             jnp.where(lost, Status.LOST_CONTACT,
              jnp.where(slip, Status.SLIP_FAILURE,
              jnp.where(st.d >= model.D, Status.SUCCESS,
              jnp.where(count >= model.cfg.max_steps + 1, Status.MAX_STEPS, RUNNING)))))))

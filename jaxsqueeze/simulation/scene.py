@@ -273,6 +273,9 @@ class Scene:
                     raise ValueError(f"grip node(s) {bad} are not on the boundary; pick nodes from "
                                      "mesh.boundary (or use Scene.nearest_boundary_node).")
         s = self.settings
+        if not isinstance(s, Settings):
+            raise TypeError(f"Scene.settings must be a jsq.Settings, got {type(s).__name__} ({s!r:.60}); "
+                            "leave it out for the defaults")
         for name in ("capacity", "sliding_capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
             v = getattr(s, name)
             if name in ("capacity", "sliding_capacity") and v is None:
@@ -375,8 +378,14 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
             if len(per) >= CACHE_PER_OBJECT:
                 per.pop(next(iter(per)))
             per[key] = op
-    h = material.thickness if solid else obj.height
-    return dataclasses.replace(op, stiffness=as_array(material.E * h, op.G.dtype))
+    return dataclasses.replace(op, stiffness=stiffness_of(obj, material, op.G.dtype))
+
+
+def stiffness_of(obj, material: Material, dtype=None) -> jax.Array:
+    """E h [N/m] of a mesh (h = ``material.thickness``) or band (h = its height): the force
+    scale of a compliance operator, whose scaled G depends on the object and ν only."""
+    h = material.thickness if isinstance(obj, Mesh) else obj.height
+    return as_array(material.E * h, dtype)
 
 
 def boundary_curve(obj) -> "boundary.Curve":

@@ -37,7 +37,10 @@ _ADVICE = {
     Status.MAX_STEPS: "Step bound reached. Raise Settings.max_steps or the step size.",
     Status.NEWTON_FAILURE: "Slip-angle Newton did not converge. Lower Settings.step or raise Settings.newton_iters.",
     Status.OVERFLOW: "More contact nodes than slots, or more sliding nodes than Newton slots. Raise Settings.capacity or Settings.sliding_capacity (or leave both at None: an eager squeeze then grows them).",
-    Status.NONFINITE: "A non-finite value appeared. Check the scene's scale and material values.",
+    Status.NONFINITE: ("A non-finite value appeared: a configuration solve was singular or overflowed. Check the "
+                       "grip (two contacts that cannot hold the object, e.g. both on one straight edge), the "
+                       "fingertip rotation (too fast), and the scene's scale and material values (units, and E "
+                       "within the precision: float32 overflows near 1e38)."),
     Status.EVENT_OVERFLOW: "The event log is full. Raise Settings.max_events.",
     Status.STALLED: ("No consistent contact set exists at this depth: a node touched a fingertip but as a contact "
                      "it would pull, or (frictionless) holding the object in place would take more than 1 % "

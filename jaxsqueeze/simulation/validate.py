@@ -50,6 +50,7 @@ FIELDS: tuple[str, ...] = (
     "grip",
     "fingers.rotation",
     "grip.overlap",
+    "placement",
 )
 """The checked values; a value's position here is the index reported in results."""
 
@@ -106,9 +107,25 @@ def _r_depth(values, xp):
     d = xp.asarray(d)
     ok = _finite_pos(xp, d)
     gd = _get(values, "grip_distance")
-    if gd is not None:
-        ok = ok & (d < xp.asarray(gd))
+    if gd is not None:       # compared only with a valid grip (a bad grip is reported once, as grip)
+        grip_ok = _r_grip(values, xp)
+        ok = ok & ((d < xp.asarray(gd)) | (False if grip_ok is None else ~grip_ok))
     return ok
+
+
+#: the largest penetration tolerance, as a fraction of the object's size (the default is 1e-9
+#: of it in float64, 1e-5 in float32): beyond it nodes sink visibly into the fingertips unseen
+GAP_SHARE = 1e-2
+
+
+def _r_gap_tol(values, xp):
+    t = _get(values, "settings.gap_tol")
+    if t is None:
+        return None
+    t = xp.asarray(t)
+    ok = _finite_pos(xp, t)
+    size = _get(values, "size")
+    return ok if size is None else ok & (t <= GAP_SHARE * xp.asarray(size))
 
 
 def _eps(values, step, xp):
@@ -153,6 +170,13 @@ def _r_rotation(values, xp):
     return xp.all(xp.isfinite(r), axis=(-2, -1)) if r.ndim >= 2 else xp.all(xp.isfinite(r))
 
 
+def _r_placement(values, xp):
+    s, a = _get(values, "placement.s"), _get(values, "placement.angle")
+    if s is None:
+        return None
+    return xp.all(xp.isfinite(xp.asarray(s)), axis=-1) & xp.isfinite(xp.asarray(a))
+
+
 def _r_overlap(values, xp):
     ov = _get(values, "grip.overlap")
     if ov is None:
@@ -190,14 +214,16 @@ RULES: tuple[Rule, ...] = (
          "use the default (None: step * 1e-4)"),
     Rule("settings.newton_tol", _r_positive("settings.newton_tol"), "a finite tolerance > 0 rad",
          "use the default (None)"),
-    Rule("settings.gap_tol", _r_positive("settings.gap_tol"), "a finite tolerance > 0 m",
-         "use the default (None)"),
+    Rule("settings.gap_tol", _r_gap_tol, f"a finite tolerance > 0 m, at most {GAP_SHARE:g} of the object's size",
+         "use the default (None: 1e-9 of the object's size in float64)"),
     Rule("grip", _r_grip, "two different boundary nodes",
          "pick nodes from mesh.boundary (e.g. Scene.nearest_boundary_node)"),
     Rule("fingers.rotation", _r_rotation, "finite polynomial coefficients", "replace NaN/inf coefficients"),
     Rule("grip.overlap", _r_overlap, f"a fingertip that touches the object only at its grip node at d = 0 "
          f"(overlap of other boundary nodes at most {OVERLAP_TOL:g} * radius)",
          "grip away from re-entrant (concave) corners or use a smaller fingertip radius"),
+    Rule("placement", _r_placement, "finite arc lengths Placement.s [m] and a finite Placement.angle [rad]",
+         "replace NaN/inf positions (s wraps around the boundary: any finite value is a position)"),
 )
 assert tuple(r.field for r in RULES) == FIELDS
 
@@ -304,6 +330,11 @@ def _boundary_geometry(obj):
     return np.asarray(obj.points), np.asarray(obj.normals), np.arange(obj.m), obj.m
 
 
+def boundary_points(obj) -> np.ndarray:
+    """(m, 2) positions of a mesh's boundary nodes or a band's nodes [m]."""
+    return _boundary_geometry(obj)[0]
+
+
 def values_of(scene, eps: float | None = None) -> dict:
     """The :func:`invalid_index` / :func:`problems` inputs of a :class:`~jaxsqueeze.Scene`.
 
@@ -333,6 +364,7 @@ def values_of(scene, eps: float | None = None) -> dict:
          "friction": scene.friction, "depth": scene.depth, "settings.step": s.step,
          "settings.event_tol": s.event_tol, "settings.newton_tol": s.newton_tol, "settings.gap_tol": s.gap_tol,
          "fingers.rotation": scene.fingers.rotation, "grip": grip, "grip_slots": slots, "n_boundary": m,
+         "size": float(np.max(np.ptp(pts_b, axis=0))),
          "grip_distance": xp.sqrt(xp.sum((pa - pb) ** 2, axis=-1))}
     if g.ndim == 1 or xp is not np:
         v["grip.overlap"] = fingertip_overlap(pts_b, nrm_b, slots, scene.fingers.radius, xp=xp)
@@ -445,16 +477,23 @@ def shape_problems(scene) -> list[str]:
                        "adversary.radius": a.radius, "adversary.step": a.step})
     out = []
     for name, value in fields.items():
-        if value is None:
-            continue
-        try:
-            x = np.asarray(value, float)
-        except (TypeError, ValueError):
+        if value is None and "." in name and name.split(".")[0] in ("settings", "adversary"):
+            continue                                    # None: the default
+        if value is None or isinstance(value, (str, bytes)) or np.asarray(value).dtype.kind not in "biuf":
             out.append(f"{name} = {value!r}: expected a number")
             continue
+        x = np.asarray(value, float)
         if x.ndim:
             out.append(f"{name} has shape {x.shape}: one squeeze takes a single number; for many values use "
                        "jax.vmap over the scene")
+    if scene.grip is not None:
+        g = np.asarray(scene.grip) if not isinstance(scene.grip, (str, bytes)) else np.asarray([scene.grip])
+        if g.dtype.kind not in "iuf" or g.dtype == bool:
+            out.append(f"grip = {scene.grip!r}: expected two integer node indices (e.g. from "
+                       "Scene.nearest_boundary_node)")
+        elif g.ndim > 1:
+            out.append(f"grip has shape {g.shape}: one squeeze takes one grip (i, j); for many grips use "
+                       "jax.vmap over the scene (or jsq.grasp_map)")
     if scene.placement is not None:
         shapes = np.shape(scene.placement.s), np.shape(scene.placement.angle)
         if shapes != ((2,), ()):
@@ -496,4 +535,5 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
 
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "invalid_index", "problems",
            "raise_if_invalid", "fingertip_overlap", "values_of", "check_scene", "history_bytes",
-           "compliance_bytes", "check_costs", "scene_cost_problems", "shape_problems", "unit_problems"]
+           "compliance_bytes", "check_costs", "scene_cost_problems", "shape_problems", "unit_problems", "GAP_SHARE",
+           "boundary_points"]

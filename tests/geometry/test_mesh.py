@@ -317,6 +317,12 @@ def test_read_errors(tmp_path):
     meshio.write(path, meshio.Mesh(tilted, [("triangle", np.array([[0, 1, 2]]))]))
     with pytest.raises(ValueError, match=r"not planar: nodes 1"):
         read_mesh(path)
+    path = tmp_path / "nan_z.vtu"                    # a NaN z is not 0 either (|NaN| > tol is False)
+    meshio.write(path, meshio.Mesh(pts3 + [[0, 0, 0], [0, 0, np.nan], [0, 0, 0]], [("triangle", np.array([[0, 1, 2]]))]))
+    with pytest.raises(ValueError, match=r"not planar: nodes 1"):
+        read_mesh(path)
+    with pytest.raises(ValueError, match=r"points must be an \(n, 2\) array of numbers"):
+        Mesh.from_arrays("abc", [[0, 1, 2]])
 
 
 # ----------------------------------------------------------------------------- issue 12: bad meshes

@@ -149,7 +149,10 @@ def test_good_run_is_atomic_and_no_plots_replaces_old_pictures(tmp_path, capsys)
     out.mkdir()
     (out / "deformed.png").write_bytes(b"old picture")
     (out / "summary.json").write_text('{"old": true}')
-    rc, err, _, _ = _run(tmp_path, BASE.replace("E = 1.0e5", "E = 1e308"), capsys)
+    rc, err, _, _ = _run(tmp_path, BASE.replace("E = 1.0e5", "E = 1e308"), capsys)   # forces would overflow
+    assert rc == 2 and "force scale E * thickness * size" in err, err
+    assert (out / "deformed.png").read_bytes() == b"old picture"    # a refused scene writes nothing
+    rc, err, _, _ = _run(tmp_path, BASE.replace("E = 1.0e5", "E = 1e150"), capsys)    # extreme, still representable
     assert rc in (0, 1), err
     assert "deformed.png" not in os.listdir(out)                # no old picture beside the new summary
     text = (out / "summary.json").read_text()

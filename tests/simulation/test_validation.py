@@ -1,6 +1,7 @@
 """The validation layer (issue 12): every rule eagerly and under jit / vmap / jvp, the same answer."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -16,6 +17,7 @@ GOOD = {
     "friction": 0.5, "depth": 0.01, "grip_distance": 0.1, "settings.step": 2e-4, "settings.event_tol": 2e-8,
     "settings.newton_tol": 1e-11, "settings.gap_tol": 1e-10, "grip_slots": np.array([3, 20]), "n_boundary": 40,
     "fingers.rotation": np.zeros((2, 1)), "grip.overlap": np.array([-1e-3, -1e-3]),
+    "placement.s": np.array([0.0, 0.2]), "placement.angle": 0.0, "size": 0.1,
 }
 NAN, INF = float("nan"), float("inf")
 POS = [NAN, INF, -INF, 0.0, -1.0]
@@ -29,13 +31,15 @@ BAD = {
     "settings.step": POS + [1e-300, 1e-17, 0.02],  # below the depth's round-off; above the depth
     "settings.event_tol": POS,
     "settings.newton_tol": POS,
-    "settings.gap_tol": POS,
+    "settings.gap_tol": POS + [2e-3],            # beyond 1 % of the object (0.1 m) nodes sink in unseen
     "grip_slots": [np.array([3, 3]), np.array([-1, 20]), np.array([3, 40]), np.array([1000000, 2])],
     "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]])],
     "grip.overlap": [np.array([1.4e-3, -1.0]), np.array([NAN, 0.0])],
+    "placement.s": [np.array([NAN, 0.2]), np.array([0.0, INF])],
 }
 KEY = {f: f for f in V.FIELDS}
 KEY["grip"] = "grip_slots"
+KEY["placement"] = "placement.s"
 CASES = [(k, f, v) for k, f in enumerate(V.FIELDS) for v in BAD[KEY[f]]]
 
 
@@ -134,6 +138,8 @@ def test_scene_values_eager_and_batched(square):
     interior = int(np.setdiff1d(np.arange(square.n), square.boundary)[0])
     assert int(g(jnp.array([interior, sc.grip[1]]))) == V.FIELDS.index("grip")
     assert int(g(jnp.array(sc.grip))) == -1
+    # the same node twice is a bad grip (not a depth beyond a grip distance of 0)
+    assert int(g(jnp.array([sc.grip[0]] * 2))) == V.FIELDS.index("grip")
 
 
 @pytest.mark.parametrize("change,field", [
@@ -199,3 +205,80 @@ def test_mixed_units():
     err, warn = V.unit_problems(size=0.1, radius=0.01, depth=0.01, E=1.0)
     assert not err and any("pascals" in w for w in warn)
     assert V.unit_problems(size=0.1, radius=0.01, depth=0.01, E=1e5) == ([], [])
+
+
+# ----------------------------------------------------------------------------- the front door, as a hostile user
+@pytest.mark.parametrize("change,error,message", [
+    (dict(material=jsq.Material(E="1e5", nu=0.3, thickness=0.0254)), ValueError, "material.E = '1e5': expected a number"),
+    (dict(material=jsq.Material(E=None, nu=0.3, thickness=0.0254)), ValueError, "material.E = None: expected a number"),
+    (dict(friction=None), ValueError, "friction = None: expected a number"),
+    (dict(fingers=jsq.Fingers(radius="0.01")), ValueError, "fingers.radius = '0.01': expected a number"),
+    (dict(grip=("3", "13")), ValueError, "grip = .*expected two integer node indices"),
+    (dict(grip=np.array([[3, 13], [1, 11]])), ValueError, r"grip has shape \(2, 2\): one squeeze takes one grip"),
+    (dict(material=None), TypeError, "Scene.material must be a jsq.Material, got NoneType"),
+    (dict(fingers=0.01), TypeError, "Scene.fingers must be a jsq.Fingers, got float"),
+    (dict(settings=None), TypeError, "Scene.settings must be a jsq.Settings"),
+    (dict(settings=jsq.Settings(gap_tol=1.0)), ValueError, "settings.gap_tol = 1.0: expected .* at most 0.01 of the object's size"),
+])
+def test_wrong_types_and_sizes_are_named(square, change, error, message):
+    """Each fails before any tracing, with the field and what it should be (they reached
+    string arithmetic, a numpy ufunc or an attribute error deep inside before)."""
+    with pytest.raises(error, match=message):
+        jsq.squeeze(_scene(square, **change))
+
+
+def test_squeeze_takes_a_scene_and_an_operator(square):
+    with pytest.raises(TypeError, match="squeeze takes a jsq.Scene, got Mesh"):
+        jsq.squeeze(square)
+    with pytest.raises(TypeError, match=r"op must be the scene's compliance operator \(op = scene.operator\(\)\)"):
+        jsq.squeeze(_scene(square), op="sparse")
+    with pytest.raises(TypeError, match="Scene.grip must be integer node indices"):     # traced floats
+        jax.jit(lambda g: jsq.squeeze(_scene(square, grip=g)))(jnp.array([3.0, 13.0]))
+
+
+def test_a_given_operator_takes_E_and_thickness_from_the_scene_and_must_match_it(square):
+    """An operator fixes the object and ν (its scaled G depends on nothing else); E and the
+    thickness only scale it and are the scene's, derivatives included (a given op kept the E
+    and thickness it was built with: half the force at twice E, and dF/dE = 0)."""
+    sc = _scene(square)
+    op = sc.operator()
+    for mat in (jsq.Material(E=2e5, nu=0.3, thickness=0.0254), jsq.Material(E=1e5, nu=0.3, thickness=0.0508)):
+        other = sc.replace(material=mat)
+        np.testing.assert_allclose(jsq.squeeze(other, op=op).total_force, jsq.squeeze(other).total_force, rtol=1e-12)
+        np.testing.assert_allclose(jsq.squeeze(other, op=op).total_force[-1, 1, 1],
+                                   2 * jsq.squeeze(sc).total_force[-1, 1, 1], rtol=1e-12)
+    f = lambda E: jsq.squeeze(sc.replace(material=jsq.Material(E=E, nu=0.3, thickness=0.0254)), op=op).grip_force  # noqa: E731
+    y, dy = jax.jvp(f, (1e5,), (1.0,))
+    np.testing.assert_allclose(dy, y / 1e5, rtol=1e-9)                  # the force is linear in E
+    with pytest.raises(ValueError, match="op was built for nu = 0.3, but the scene's material has nu = 0.45"):
+        jsq.squeeze(sc.replace(material=jsq.Material(E=1e5, nu=0.45, thickness=0.0254)), op=op)
+    finer = _scene(jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01))
+    with pytest.raises(ValueError, match="op was built for another object"):
+        jsq.squeeze(sc, op=finer.operator())
+
+
+def test_a_force_scale_beyond_the_precision_is_refused(square):
+    """E h L whose forces would overflow when squared (E = 1e30 Pa in float32 gave inf grip
+    forces with SUCCESS)."""
+    from jaxsqueeze.simulation import api
+    op = _scene(square).operator()
+    api.check_force_scale(op)
+    f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+    op32 = dataclasses.replace(op, G=f32(op.G), length=f32(op.length), stiffness=f32(1e30 * 0.0254))
+    with pytest.raises(ValueError, match="force scale E \\* thickness \\* size = 2.5.e\\+27 N is too large for float32"):
+        api.check_force_scale(op32)
+    api.check_force_scale(dataclasses.replace(op32, stiffness=f32(1e5 * 0.0254)))
+
+
+def test_a_placement_turned_past_a_right_angle_does_not_grip_through_the_object(square):
+    """Placement angle π: each tip would close in away from the other and 'touch' the far
+    side through the object (it reported SUCCESS on swapped nodes). A touch more than a radius
+    behind a tip's placed position is no touch: INFEASIBLE_GRIP. At π/2 the tips slide off and
+    both contacts break at once: LOST_CONTACT, not the NaNs of the empty contact set."""
+    sc = _scene(square)
+    P = float(sc.curve().perimeter)
+    sc = sc.replace(grip=None, placement=jsq.Placement(s=(0.0, P / 2)))
+    res = {a: jsq.squeeze(sc.replace(placement=jsq.Placement(s=(0.0, P / 2), angle=a))) for a in (0.3, np.pi / 2, np.pi)}
+    assert res[0.3].status == jsq.Status.SUCCESS
+    assert res[np.pi / 2].status == jsq.Status.LOST_CONTACT
+    assert res[np.pi].status == jsq.Status.INFEASIBLE_GRIP and float(res[np.pi].margin) == -np.pi
