@@ -560,9 +560,10 @@ def run(model: Model, st: State) -> State:
 
 def start_push(model: Model, st: State) -> State:
     """Hand a finished squeeze to the adversary phase: λ restarts at 0 from the squeezed state
-    (contacts, anchors and forces carry over); only a squeeze that succeeded is pushed. The
-    first iteration (PRIME) evaluates the push phase's event functions at λ = 0."""
-    status = jnp.where(st.status == Status.SUCCESS, RUNNING, st.status).astype(jnp.int32)
+    (contacts, anchors and forces carry over); only a squeeze that succeeded is pushed, and only
+    by a pusher that can touch it (:func:`push_model`; else INFEASIBLE_GRIP). The first iteration (PRIME) evaluates the push phase's event functions at λ = 0."""
+    go = jnp.where(model.margin < 0, Status.INFEASIBLE_GRIP, RUNNING)      # a pusher that cannot touch
+    status = jnp.where(st.status == Status.SUCCESS, go, st.status).astype(jnp.int32)
     hist = list(st.hist)
     hist[6] = hist[6].at[:, 2].set(model.base[2])       # the pusher waits at its start in squeeze rows
     return _with(st, d=jnp.zeros_like(st.d), status=status, squeeze_status=st.status, hist=tuple(hist),

@@ -227,6 +227,12 @@ def _scaled_curve(c, L):
     return boundary.Curve(jnp.asarray(c.knots) / L, jnp.asarray(c.coef) * (L ** (2.0 - jnp.arange(4)))[None, :, None])
 
 
+def _turn(n, a):
+    """(2,) the vector n turned by the angle a [rad]."""
+    ca, sa = jnp.cos(a), jnp.sin(a)
+    return jnp.array([ca * n[0] - sa * n[1], sa * n[0] + ca * n[1]])
+
+
 def push_model(model: Model, grasp: Grasp, st) -> Model:
     """The adversary phase's model, from the squeeze model and its final state: the grasping
     fingers hold still at the final depth, and a third fingertip, placed on the smooth boundary
@@ -250,19 +256,30 @@ def push_model(model: Model, grasp: Grasp, st) -> Model:
     q = q + (1 - w) * st.u[i] + w * st.u[j]
     chord0 = op.points[j] - op.points[i]
     chord = chord0 + st.u[j] - st.u[i]
-    turn = angle + jnp.arctan2(cross2(chord0, chord), jnp.sum(chord0 * chord))
-    ca, sa = jnp.cos(turn), jnp.sin(turn)
-    v = -jnp.array([ca * n[0] - sa * n[1], sa * n[0] + ca * n[1]])
+    nd = _turn(n, jnp.arctan2(cross2(chord0, chord), jnp.sum(chord0 * chord)))
+    v = -_turn(nd, angle)
+    # the pusher starts on the boundary point (tangent there, as a placed grasping fingertip)
     r3 = radius / L
-    o = q - r3 * v
-    t, _ = first_touch(op.points + st.u, o, v, r3)
-    t = jnp.where(jnp.isfinite(t), t, 0.0)
-    base = model.centres(st.d).at[2].set(o + t * v)
+    o = q + r3 * nd
+    x = op.points + st.u
+    t, _ = first_touch(x, o, v, r3)
+    # the pusher must touch the squeezed object from outside, as a placed grasping fingertip
+    # must (make_model): not miss it, not reach it through the object (a touch more than a
+    # radius behind the start, |angle| near π/2 or beyond), not start inside it, and not
+    # overlap a grasping fingertip (a push on a finger's own contact). Otherwise the push
+    # phase ends at once with INFEASIBLE_GRIP (margin −π) and pushes nothing
+    touches = jnp.isfinite(t) & (t > -r3)
+    t = jnp.where(touches, t, 0.0)
+    c3 = o + t * v
+    held = model.centres(st.d)[:2]
+    clear = jnp.linalg.norm(held - c3, axis=1) > model.r[:2] + r3
+    touches = touches & jnp.all(clear) & ~boundary.inside(x, op.loops, c3[None])[0]
+    base = model.centres(st.d).at[2].set(c3)
     dirn = jnp.zeros_like(model.dirn).at[2].set(v)
     h = step / L
     return dataclasses.replace(model, base=base, dirn=dirn, present=jnp.ones_like(model.present), r=model.r.at[2].set(r3),
                           rot_depth=jnp.stack([st.d, jnp.zeros((), dt)]), D=push / L, h=h,
                           ev_tol=h * 1e-4, eta=jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps),
-                          phase=jnp.array(1, jnp.int32))
+                          margin=jnp.where(touches, model.margin, -jnp.pi), phase=jnp.array(1, jnp.int32))
 
 

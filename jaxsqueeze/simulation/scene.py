@@ -88,14 +88,17 @@ class Adversary:
     of Jia, Guo and Lin, IJRR 2014), as a second loading phase of the same event loop.
 
     s: () arc length [m] of the pushed boundary point (as in :class:`Placement`).
-    push: () push displacement [m] > 0.
-    angle: () push direction offset [rad] from the inward normal at s.
+    push: () push displacement [m] > 0, shorter than the object.
+    angle: () push direction offset [rad] from the inward normal at s, |angle| < π/2.
     radius: () fingertip radius [m]; None: the grasping fingers' radius.
-    step: () push step [m]; None: push / 50.
+    step: () push step [m], at most the push and the pusher's radius; None: push / 50.
 
     The grasping fingers hold still at the squeeze depth; the pusher starts on the boundary
-    point, closes in until it touches the deformed object, then moves by the push. Only a
-    squeeze that succeeded is pushed. Needs a continuous :class:`Placement`'s curve, so a
+    point (tangent to the deformed object there), closes in along its push direction until it
+    touches, then moves by the push. Only a squeeze that succeeded is pushed. A pusher that
+    cannot touch the object there from outside (its path misses the object or reaches it
+    through the object, as at |angle| ≥ π/2, or it would overlap a grasping fingertip) pushes
+    nothing: the result's status is ``INFEASIBLE_GRIP`` and ``squeeze_status`` the squeeze's. Needs a continuous :class:`Placement`'s curve, so a
     scene with an adversary is placed by arc length (a grip is converted to one).
     """
 

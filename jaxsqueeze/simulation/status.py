@@ -14,7 +14,7 @@ class Status(enum.IntEnum):
     OVERFLOW = 4         #: more contact (or sliding) nodes than slots (raise ``capacity`` / ``sliding_capacity``)
     NONFINITE = 5        #: a NaN or inf appeared in the state
     EVENT_OVERFLOW = 6   #: the event log is full (raise ``max_events``)
-    INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone
+    INFEASIBLE_GRIP = 7  #: the segment between the initial contacts leaves a friction cone, or a placed fingertip (pusher) cannot touch
     STALLED = 8          #: no consistent contact set at this depth (an event undid itself, or a frictionless object would slide away)
     LOST_CONTACT = 9     #: a grasping finger lost all of its contacts (the object fell out)
     INVALID_INPUT = 10   #: a number of the scene or its settings is invalid (see ``result.invalid``)
@@ -47,5 +47,8 @@ _ADVICE = {
                      "tangential force, i.e. the object would slide out sideways (an asymmetric frictionless "
                      "grip). Grip nearer a symmetry line, refine the mesh near the contact, or use Coulomb friction."),
     Status.INFEASIBLE_GRIP: ("The segment between the two grip nodes leaves a friction cone, so the squeeze "
-                             "cannot start (Section I-A). Pick nodes more nearly opposite or raise the friction."),
+                             "cannot start (Section I-A), or a placed fingertip (or the adversary's pusher, "
+                             "when result.squeeze_status is SUCCESS) cannot touch the object from outside where "
+                             "it was placed. Pick nodes more nearly opposite, raise the friction, or place the "
+                             "fingertip (pusher) elsewhere or more nearly along the inward normal."),
 }

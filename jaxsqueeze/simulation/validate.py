@@ -51,6 +51,7 @@ FIELDS: tuple[str, ...] = (
     "fingers.rotation",
     "grip.overlap",
     "placement",
+    "adversary",
 )
 """The checked values; a value's position here is the index reported in results."""
 
@@ -177,6 +178,20 @@ def _r_placement(values, xp):
     return xp.all(xp.isfinite(xp.asarray(s)), axis=-1) & xp.isfinite(xp.asarray(a))
 
 
+def _r_adversary(values, xp):
+    push = _get(values, "adversary.push")
+    if push is None:
+        return None
+    push, r, h = (xp.asarray(values[k]) for k in ("adversary.push", "adversary.radius", "adversary.step"))
+    ok = xp.isfinite(xp.asarray(values["adversary.s"])) & xp.isfinite(xp.asarray(values["adversary.angle"]))
+    ok = ok & _finite_pos(xp, push) & _finite_pos(xp, r) & _finite_pos(xp, h)
+    # a step longer than the pusher's radius could carry it across a boundary node unseen
+    # (the gap is checked at the ends of a step), and a push as long as the object crushes it
+    ok = ok & (h <= push) & (h <= r) & (h > STEP_RESOLUTION * _eps(values, h, xp) * push)
+    size = _get(values, "size")
+    return ok if size is None else ok & (push < xp.asarray(size))
+
+
 def _r_overlap(values, xp):
     ov = _get(values, "grip.overlap")
     if ov is None:
@@ -224,6 +239,10 @@ RULES: tuple[Rule, ...] = (
          "grip away from re-entrant (concave) corners or use a smaller fingertip radius"),
     Rule("placement", _r_placement, "finite arc lengths Placement.s [m] and a finite Placement.angle [rad]",
          "replace NaN/inf positions (s wraps around the boundary: any finite value is a position)"),
+    Rule("adversary", _r_adversary, "a finite Adversary.s [m] and angle [rad], a push [m] > 0 shorter than the "
+         "object, a radius [m] > 0 and a step [m] > 0 at most the push and the pusher's radius",
+         "use a push below the object's size and the default step (None: push / 50), or a step below the "
+         "pusher's radius"),
 )
 assert tuple(r.field for r in RULES) == FIELDS
 
@@ -270,6 +289,10 @@ def _context(rule: Rule, values) -> str:
         return f" (depth {_show(values['depth'])} m)"
     if f == "grip":
         return f" (positions among the boundary nodes: {_show(values['grip_slots'])}; -1 = not on the boundary)"
+    if f == "adversary":
+        return " (s, angle; " + ", ".join(f"{k.split('.')[1]} {_show(values.get(k))}" for k in
+                                ("adversary.push", "adversary.radius", "adversary.step")) + \
+            ("" if values.get("size") is None else f", object size {_show(values['size'])} m") + ")"
     if f == "grip.overlap" and values.get("fingers.radius") is not None:
         return f" (fingertip radius {_show(values['fingers.radius'])} m)"
     return ""
@@ -286,6 +309,8 @@ def problems(values: dict) -> list[str]:
             shown = values.get("grip" if rule.field == "grip" and "grip" in values else rule.field)
             if rule.field == "grip" and shown is None:
                 shown = values.get("grip_slots")
+            if rule.field == "adversary":
+                shown = (values.get("adversary.s"), values.get("adversary.angle"))
             out.append(f"{rule.field} = {_show(shown)}{_context(rule, values)}: expected {rule.requirement}; "
                        f"{rule.fix}.")
     return out

@@ -246,6 +246,25 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
     assert float(Q.failure_push(res)) == pytest.approx(0.003)
 
 
+def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):
+    """An adversary turned past a right angle from the inward normal would reach the object
+    through it (it pushed the far side), and one placed on a grasping fingertip's contact
+    would overlap that fingertip: the push phase ends at once with INFEASIBLE_GRIP, the squeeze
+    keeps its SUCCESS, and the push does no work. Turned 0.6 rad the pusher pushes (work > 0),
+    and a push as long as the object is refused before running."""
+    k = nearest(square.mesh, (0.05, 0.0))
+    s3 = float(square.arc_length([k])[0])
+    s_grip = float(square.arc_length([square.grip[0]])[0])
+    for s, angle, pushes in ((s3, 0.6, True), (s3, 1.7, False), (s3, np.pi, False), (s_grip, 0.0, False)):
+        res = jsq.squeeze(square.replace(adversary=plan.Adversary(s=s, push=0.003, angle=angle)))
+        assert int(res.squeeze_status) == jsq.Status.SUCCESS
+        assert (res.outcome == jsq.Status.SUCCESS) == pushes, (s, angle, res.outcome)
+        assert pushes or (res.outcome == jsq.Status.INFEASIBLE_GRIP and float(Q.adversary_work(res)) == 0.0)
+        assert not pushes or float(Q.adversary_work(res)) > 0
+    with pytest.raises(ValueError, match="push 0.2, radius 0.01, step 0.004, object size 0.1"):
+        jsq.squeeze(square.replace(adversary=plan.Adversary(s=s3, push=0.2)))
+
+
 def test_map_chunks_across_processes_equal_the_loop(ellipse, tmp_path):
     """evaluate(batch="processes"): chunks of candidates looped in two worker processes give
     the loop's statuses and qualities, in input order (an infeasible pair included)."""

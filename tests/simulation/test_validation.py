@@ -18,6 +18,8 @@ GOOD = {
     "settings.newton_tol": 1e-11, "settings.gap_tol": 1e-10, "grip_slots": np.array([3, 20]), "n_boundary": 40,
     "fingers.rotation": np.zeros((2, 1)), "grip.overlap": np.array([-1e-3, -1e-3]),
     "placement.s": np.array([0.0, 0.2]), "placement.angle": 0.0, "size": 0.1,
+    "adversary.s": 0.05, "adversary.angle": 0.0, "adversary.push": 0.003, "adversary.radius": 0.01,
+    "adversary.step": 6e-5,
 }
 NAN, INF = float("nan"), float("inf")
 POS = [NAN, INF, -INF, 0.0, -1.0]
@@ -36,10 +38,12 @@ BAD = {
     "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]])],
     "grip.overlap": [np.array([1.4e-3, -1.0]), np.array([NAN, 0.0])],
     "placement.s": [np.array([NAN, 0.2]), np.array([0.0, INF])],
+    "adversary.push": POS + [0.1, 0.5],           # as long as the object (0.1 m) or longer: it would crush it
 }
 KEY = {f: f for f in V.FIELDS}
 KEY["grip"] = "grip_slots"
 KEY["placement"] = "placement.s"
+KEY["adversary"] = "adversary.push"
 CASES = [(k, f, v) for k, f in enumerate(V.FIELDS) for v in BAD[KEY[f]]]
 
 
@@ -68,6 +72,19 @@ def test_rule_eager_jit_vmap_agree(k, field, bad):
     rest = {kk: vv for kk, vv in GOOD.items() if kk != KEY[field]}
     out = jax.jit(jax.vmap(lambda x: V.invalid_index(dict(rest, **{KEY[field]: x}))))(batch)
     assert out.tolist() == [-1, k]
+
+
+@pytest.mark.parametrize("change", [{"adversary.step": 0.011}, {"adversary.step": 0.004}, {"adversary.step": 1e-300},
+                                    {"adversary.step": NAN}, {"adversary.radius": 0.0}, {"adversary.s": NAN},
+                                    {"adversary.angle": INF}], ids=str)
+def test_adversary_step_beyond_its_radius_or_push_is_refused(change):
+    """The pusher's step must be at most its radius (a longer step could carry it across a
+    boundary node between two gap checks: it passed through the object, SUCCESS with no work)
+    and at most the push; its position, angle and radius finite."""
+    vals = dict(GOOD, **change)
+    p = V.problems(vals)
+    assert len(p) == 1 and p[0].startswith("adversary = ") and "push 0.003, radius" in p[0], p
+    assert int(jax.jit(V.invalid_index)(vals)) == V.FIELDS.index("adversary")
 
 
 def test_first_invalid_wins_and_all_problems_listed():
