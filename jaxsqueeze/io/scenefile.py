@@ -627,8 +627,6 @@ def _band(obj, height, overrides=(None, None)):
     kind = _choice("object.band", obj["band"], BANDS)
     size = _number("object.size", obj["size"], positive=True)
     m = _number("object.nodes", obj["nodes"], integer=True)
-    if m < 8:
-        raise SceneFileError("object.nodes", f"a band needs at least 8 nodes, got {m}")
     width = _number("object.width", obj["width"], positive=True) if "width" in obj else 0.5e-3
     try:
         curve = {"heart": lambda: curves.heart(size), "leaf": lambda: curves.leaf(size, size / 2, size / 40),

@@ -57,6 +57,7 @@ L = the larger bounding-box side of the nodes. A thin band is compliant, so G is
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -101,6 +102,36 @@ def _spline(xy: np.ndarray, iters: int = 2):
         uq = u[:-1, None] + 0.5 * (xg + 1.0) * seg[:, None]
         seg = 0.5 * seg * (np.linalg.norm(cs(uq, 1), axis=-1) @ wg)
     return cs, u[:-1], u[-1]
+
+
+#: fewest band nodes: the spline through fewer does not resolve even a circle
+MIN_NODES = 8
+#: most band nodes a band is built with (a setting: assign it or set the environment variable
+#: ``JAXSQUEEZE_MAX_BAND_NODES``): its operator is dense, (4m)² numbers, 0.5 GB at m = 2048
+MAX_NODES = int(float(os.environ.get("JAXSQUEEZE_MAX_BAND_NODES", 2048)))
+_FEW = ("a ring of 4 nodes is about 800 times too stiff and one of 8 about 35 % (a circle); use at least 64 nodes "
+        "for a curved outline (the examples use 128)")
+
+
+def _check_size(m: int) -> None:
+    """Refuse a band of more than :data:`MAX_NODES` nodes before any O(m²) work."""
+    if m > MAX_NODES:
+        raise ValueError(f"a band of {m:,} nodes needs dense matrices of (4m)² = {(4 * m) ** 2 * 8 / 1024 ** 3:.3g} GiB "
+                         f"each, beyond the limit of {MAX_NODES:,} nodes (jaxsqueeze.mechanics.band.MAX_NODES, env "
+                         "JAXSQUEEZE_MAX_BAND_NODES); 128-256 nodes resolve the examples' outlines")
+
+
+def _length(name: str, v) -> float:
+    """A band dimension as a float, or ValueError naming it (finite and > 0 m)."""
+    try:
+        if isinstance(v, (str, bytes)):
+            raise TypeError
+        x = float(v)
+    except (TypeError, ValueError):
+        raise ValueError(f"band {name} = {v!r}: expected a length in metres > 0") from None
+    if not (np.isfinite(x) and x > 0):
+        raise ValueError(f"band {name} = {v!r}: expected a finite length > 0 m")
+    return x
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,10 +218,11 @@ class Band:
         band's geometry; use enough of them to resolve the curvature.
         """
         xy = np.asarray(xy, dtype=np.float64)
-        if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 4 or not np.all(np.isfinite(xy)):
-            raise ValueError(f"xy must be a finite (m, 2) array with m >= 4, got shape {xy.shape}")
-        if not (width > 0 and height > 0):
-            raise ValueError(f"band width and height must be > 0 m, got {width!r}, {height!r}")
+        _check_size(len(xy))
+        if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < MIN_NODES or not np.all(np.isfinite(xy)):
+            raise ValueError(f"xy must be a finite (m, 2) array with m >= {MIN_NODES}, got shape {xy.shape}: "
+                             f"{_FEW}")
+        width, height = _length("width", width), _length("height", height)
         x, y = xy[:, 0], xy[:, 1]
         hit = crossing(xy, (len(xy),))
         if hit is not None:
@@ -222,8 +254,9 @@ class Band:
         ``gamma(p)``: p in [0, 1) (k,) -> points (k, 2) [m], vectorized (see
         :mod:`jaxsqueeze.curves`). Node 0 is gamma(0).
         """
-        if m < 4:
-            raise ValueError(f"a band needs m >= 4 nodes, got {m}")
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < MIN_NODES:
+            raise ValueError(f"a band needs an integer number of nodes m >= {MIN_NODES}, got {m!r}: {_FEW}")
+        _check_size(m)
         return cls.from_curve(np.asarray(gamma(arclength_params(gamma, m)), dtype=np.float64), width, height)
 
     def to_xy(self) -> np.ndarray:

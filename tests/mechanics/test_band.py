@@ -162,3 +162,23 @@ def test_curves():
         Band.from_curve(twisted)
     with pytest.raises(ValueError):
         curves.leaf(0.08, 0.04, tip=0.03)
+
+
+@pytest.mark.parametrize("args,kw,match", [
+    ((4,), {}, "m >= 8, got 4: a ring of 4 nodes is about 800 times too stiff"),
+    ((10.5,), {}, "integer number of nodes m >= 8, got 10.5"),
+    ((True,), {}, "integer number of nodes"),
+    ((10 ** 6,), {}, "a band of 1,000,000 nodes needs dense matrices .* beyond the limit of 2,048 nodes"),
+    ((16,), dict(width=float("inf")), "band width = inf: expected a finite length > 0 m"),
+    ((16,), dict(height="5"), "band height = '5': expected a length in metres"),
+    ((16,), dict(height=-1.0), "band height = -1.0"),
+])
+def test_bands_too_coarse_too_large_or_of_bad_size_are_refused(args, kw, match):
+    """A band of 4 nodes was accepted and about 800 times too stiff (a circle: the spline through
+    4 points does not resolve it; 8 nodes are 35 % off, 64 within 0.5 %); a million nodes hung
+    in the O(m²) self-crossing check before the squeeze's memory guard; an infinite width or a
+    string height went through or failed deep inside."""
+    with pytest.raises(ValueError, match=match):
+        Band.from_function(curves.circle(0.04), *args, **kw)
+    with pytest.raises(ValueError, match="m >= 8, got shape"):
+        Band.from_curve(curves.sample(curves.circle(0.04), 5))
