@@ -101,8 +101,11 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> 
     qfn = quality_of(scene, name)
     try:
         opt = getattr(optax, settings.optimizer)(settings.learning_rate)
-    except AttributeError:
-        raise ValueError(f"plan.optimizer={settings.optimizer!r} is not an optax optimizer") from None
+        if not (hasattr(opt, "init") and hasattr(opt, "update")):
+            raise TypeError
+    except Exception:          # not in optax, or not an optimizer factory (optax.apply_updates, ...)
+        raise ValueError(f"plan.optimizer={settings.optimizer!r} is not an optax optimizer taking a learning "
+                         "rate; use e.g. \"adam\", \"sgd\" or \"adabelief\"") from None
     op = scene.operator()
     gmap = grasp_map(scene, qfn, spacing=settings.spacing or P / 24, op=op, progress=progress)
     found = optimize_placement(scene, qfn, optimizer=opt, steps=settings.steps, starts=settings.starts,

@@ -55,14 +55,54 @@ def quality_of(scene: Scene, quality) -> Callable:
     raise ValueError(f"quality={quality!r}; choose one of {QUALITIES} or pass a function of a result.")
 
 
+def _check_count(name, v, least) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+        raise ValueError(f"{name}={v!r} must be an integer >= {least}.")
+
+
+def _check_angle(angle) -> float:
+    """The squeeze-direction offset as a float, or ValueError (a finite number [rad])."""
+    ok = not isinstance(angle, (str, bytes, bool)) and np.ndim(angle) == 0
+    try:
+        ok = ok and bool(np.isfinite(float(angle)))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"angle={angle!r} must be a finite number [rad] (the squeeze-direction offset).")
+    return float(angle)
+
+
+def _check_quality(summ: Summary, X) -> None:
+    """ValueError when a successful squeeze got a non-finite quality (the quality function's fault)."""
+    bad = np.flatnonzero((summ.status == Status.SUCCESS) & ~np.isfinite(summ.quality))
+    if len(bad):
+        raise ValueError(f"the quality is {summ.quality[bad[0]]} at {len(bad)} successful squeeze(s), e.g. the "
+                         f"candidate (s_0, s_1, angle) = {np.asarray(X)[bad[0]].tolist()}: a quality must be finite "
+                         "wherever the squeeze succeeds (check the quality function for 0/0, log(0), inf)")
+
+
 def _placed(scene: Scene, x) -> Scene:
     return scene.replace(grip=None, placement=Placement(s=x[:2], angle=x[2]))
+
+
+def _quality(qfn, res):
+    """qfn(res) as a () float array, or an error naming what it returned (at trace time)."""
+    q = qfn(res)
+    try:
+        q = jnp.asarray(q)
+    except TypeError:
+        raise TypeError(f"the quality function returned {q!r}; it must return a number (a () array) "
+                        "computed from the result") from None
+    if q.shape != () or not (jnp.issubdtype(q.dtype, jnp.floating) or jnp.issubdtype(q.dtype, jnp.integer)):
+        raise ValueError(f"the quality function returned an array of shape {q.shape} and dtype {q.dtype}; it must "
+                         "return one real number (shape ()) per result, e.g. jnp.sum(...) of a vector")
+    return q
 
 
 def _summary(scene: Scene, qfn, op, x) -> Summary:
     res = squeeze(_placed(scene, x), op=op, trim=False)
     ok = res.status == Status.SUCCESS
-    q = jnp.where(ok, qfn(res), 0.0)
+    q = jnp.where(ok, _quality(qfn, res), 0.0)
     return Summary(res.status, q, res.grip_force, res.final_depth, res.margin)
 
 
@@ -130,6 +170,9 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     the scene's own.
     """
     X = np.atleast_2d(np.asarray(X, float))
+    _check_count("chunk", chunk, 1)
+    if processes is not None:
+        _check_count("processes", processes, 1)
     if batch != "processes":       # (the workers of "processes" loop through this function)
         fast = quick(scene)
         summ = _evaluate(fast, X, quality, op, batch, chunk, progress, processes, cache)
@@ -138,8 +181,10 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
             again = _evaluate(scene, X[redo], quality, op, batch, chunk, False, processes, cache)
             for a, b in zip(summ, again):
                 a[redo] = b
-        return summ
-    return _evaluate(scene, X, quality, op, batch, chunk, progress, processes, cache)
+    else:
+        summ = _evaluate(scene, X, quality, op, batch, chunk, progress, processes, cache)
+    _check_quality(summ, X)
+    return summ
 
 
 def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, cache) -> Summary:
@@ -223,10 +268,12 @@ def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float =
     Finger roles swapped give the same grasp (the squeeze is linear and total), so each
     unordered pair is squeezed once and the map is mirrored. Returns a :class:`GraspMap`.
     """
+    _check_count("keep", keep, 1)
+    angle = _check_angle(angle)
     s = grid(scene, spacing)
     n = len(s)
     i, j = np.triu_indices(n, 1)
-    X = np.stack([s[i], s[j], np.full(len(i), float(angle))], 1)
+    X = np.stack([s[i], s[j], np.full(len(i), angle)], 1)
     summ = evaluate(scene, X, quality, op=op, batch=batch, chunk=chunk, progress=progress, processes=processes)
     full = {}
     for name in ("quality", "status", "grip_force", "margin"):
@@ -249,7 +296,7 @@ def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None) -> 
 
     s = grid(scene, spacing)
     i, j = np.triu_indices(len(s), 1)
-    X = np.stack([s[i], s[j], np.full(len(i), float(angle))], 1)
+    X = np.stack([s[i], s[j], np.full(len(i), _check_angle(angle))], 1)
     op = scene.operator() if op is None else op
     sc = _placed(scene, X[0])
     cfg = api.config_of(sc)
@@ -293,9 +340,7 @@ class Search(NamedTuple):
 
 def _check_search(optimizer, steps, starts, budget, init) -> None:
     """ValueError/TypeError for arguments :func:`optimize_placement` cannot use, before any squeeze."""
-    def count(name, v, least):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
-            raise ValueError(f"{name}={v!r} must be an integer >= {least}.")
+    count = _check_count
     count("steps", steps, 0)
     count("starts", starts, 1)
     if budget is not None:
@@ -346,7 +391,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     if init is None:
         # the coarse map, screened: only pairs whose first contacts pass the cone test (the
         # approach and Section I-A's test, no squeeze) are squeezed
-        spacing = coarse_spacing or P / 16
+        spacing = P / 16 if coarse_spacing is None else coarse_spacing
         screened = len(grid(scene, spacing)) * (len(grid(scene, spacing)) - 1) // 2
         X = candidate_pairs(scene, spacing, op=op)
         summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
@@ -373,6 +418,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         s, g = _value_and_grad(fast, qfn, op, u, scale_)
         if int(s.status) == Status.OVERFLOW and _capacities(fast) != _capacities(scene):
             s, g = _value_and_grad(scene, qfn, op, u, scale_)
+        _check_quality(jax.tree.map(lambda a: np.asarray(a)[None], s), np.asarray(u)[None] / scale)
         return s, g
 
     histories, best_x, best_q = [], None, -np.inf

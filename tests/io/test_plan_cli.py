@@ -56,3 +56,13 @@ def test_plan_table_errors_name_the_key(tmp_path, capsys):
     code = cli.main(["plan", str(path), "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err
     assert code == 2 and "plan.bogus" in err and not (tmp_path / "o").exists()
+
+
+def test_plan_optimizer_that_is_not_an_optimizer_factory_is_an_input_error(tmp_path, capsys):
+    """plan.optimizer names an optax function that is not an optimizer (apply_updates): exit 2
+    with the key named, before any squeeze (it was exit 3 from inside optax)."""
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE.replace("learning_rate = 0.02", 'learning_rate = 0.02\noptimizer = "apply_updates"'))
+    code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and "plan.optimizer='apply_updates' is not an optax optimizer" in err, err

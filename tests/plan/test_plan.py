@@ -52,7 +52,37 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
             jsq.optimize_placement(ellipse, "squeeze_work", progress=False, **kw)
     with pytest.raises(TypeError, match="not an optax optimizer"):
         jsq.optimize_placement(ellipse, "squeeze_work", optimizer="adam", progress=False)
+    # a map's chunk, keep, processes and angle (chunk=0 looped forever, keep=-1 dropped the
+    # last best candidate, a NaN angle squeezed NaN placements); a zero coarse spacing of a
+    # search silently became the default
+    P = float(ellipse.curve().perimeter)
+    for kw, match in [(dict(chunk=0), "chunk=0 must be an integer >= 1"), (dict(keep=-1), "keep=-1"),
+                      (dict(processes=0), "processes=0"), (dict(angle=float("nan")), "angle=nan must be a finite"),
+                      (dict(angle="x"), "angle='x'")]:
+        with pytest.raises(ValueError, match=match):
+            jsq.grasp_map(ellipse, "squeeze_work", spacing=P / 6, progress=False, **kw)
+    with pytest.raises(ValueError, match="spacing=0 must be a finite arc length"):
+        jsq.optimize_placement(ellipse, "squeeze_work", coarse_spacing=0, progress=False)
     assert api._run._cache_size() == before
+
+
+def test_a_quality_that_is_not_one_finite_number_is_named():
+    """A quality function returning a vector or a string failed deep in a map (or broadcast
+    the summary); one returning NaN at successful squeezes ended a search with "no start
+    reached a successful squeeze". Each is now an error that says what the function returned."""
+    from jaxsqueeze.plan import search
+    res = jsq.SqueezeResult.__new__(jsq.SqueezeResult)
+    with pytest.raises(ValueError, match=r"array of shape \(3,\) .* must return one real number"):
+        search._quality(lambda r: jnp.ones(3), res)
+    with pytest.raises(TypeError, match="returned 'x'; it must return a number"):
+        search._quality(lambda r: "x", res)
+    assert search._quality(lambda r: 2.0, res).shape == ()
+    ok, bad = int(jsq.Status.SUCCESS), int(jsq.Status.SLIP_FAILURE)
+    summ = search.Summary(np.array([bad, ok, ok]), np.array([np.nan, 1.0, np.inf]), *np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"the quality is inf at 1 successful squeeze\(s\), e.g. the candidate "
+                                         r"\(s_0, s_1, angle\) = \[2.0, 2.0, 2.0\]"):
+        search._check_quality(summ, np.arange(3)[:, None] * np.ones(3))
+    search._check_quality(summ._replace(quality=np.array([np.nan, 1.0, 0.0])), np.zeros((3, 3)))
 
 
 def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
