@@ -163,12 +163,26 @@ def _r_grip(values, xp):
     return ok
 
 
+#: the largest fingertip rotation [rad] over a squeeze (ten turns): beyond it a tip rolls its
+#: contacts off within a step or two and the contact solve loses every contact at once
+MAX_ROTATION = 20 * math.pi
+
+
 def _r_rotation(values, xp):
     r = _get(values, "fingers.rotation")
     if r is None:
         return None
     r = xp.asarray(r)
-    return xp.all(xp.isfinite(r), axis=(-2, -1)) if r.ndim >= 2 else xp.all(xp.isfinite(r))
+    ok = xp.all(xp.isfinite(r), axis=(-2, -1)) if r.ndim >= 2 else xp.all(xp.isfinite(r))
+    d = _get(values, "depth")
+    if d is None or r.ndim < 2:
+        return ok
+    # max over 0 <= d' <= depth of |alpha(d')| is at most sum_k |c_k| depth^k (polyval order)
+    d = xp.asarray(d)
+    d = xp.where(_finite_pos(xp, d), d, 0.0)[..., None, None]       # a bad depth is reported as such
+    powers = d ** xp.arange(r.shape[-1] - 1, -1, -1)
+    turn = xp.sum(xp.where(xp.isfinite(r), xp.abs(r), 0.0) * powers, axis=-1)
+    return ok & xp.all(turn <= MAX_ROTATION, axis=-1)
 
 
 def _r_placement(values, xp):
@@ -233,7 +247,9 @@ RULES: tuple[Rule, ...] = (
          "use the default (None: 1e-9 of the object's size in float64)"),
     Rule("grip", _r_grip, "two different boundary nodes",
          "pick nodes from mesh.boundary (e.g. Scene.nearest_boundary_node)"),
-    Rule("fingers.rotation", _r_rotation, "finite polynomial coefficients", "replace NaN/inf coefficients"),
+    Rule("fingers.rotation", _r_rotation, "finite polynomial coefficients [rad / m^k] that turn a fingertip by at "
+         f"most {MAX_ROTATION:.4g} rad (ten turns) over the squeeze (sum of |c_k| depth^k)",
+         "replace NaN/inf coefficients; rotation is in radians against depth in metres (1 rad per mm is 1e3 rad/m)"),
     Rule("grip.overlap", _r_overlap, f"a fingertip that touches the object only at its grip node at d = 0 "
          f"(overlap of other boundary nodes at most {OVERLAP_TOL:g} * radius)",
          "grip away from re-entrant (concave) corners or use a smaller fingertip radius"),
@@ -559,6 +575,6 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
 
 
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "invalid_index", "problems",
-           "raise_if_invalid", "fingertip_overlap", "values_of", "check_scene", "history_bytes",
+           "raise_if_invalid", "fingertip_overlap", "MAX_ROTATION", "values_of", "check_scene", "history_bytes",
            "compliance_bytes", "check_costs", "scene_cost_problems", "shape_problems", "unit_problems", "GAP_SHARE",
            "boundary_points"]

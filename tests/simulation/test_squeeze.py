@@ -405,6 +405,11 @@ def test_jacfwd_in_every_number_matches_central_differences(slanted):
         fd = (float(force(up)) - float(force(down))) / (2 * h)
         assert abs(fd) > 0, name
         np.testing.assert_allclose(J[k], fd, rtol=1e-5, err_msg=name)
+    # README: at an input refused under tracing (a depth beyond the grip distance:
+    # Status.INVALID_INPUT) the derivatives are those of the returned result, zero forces
+    bad = p0.copy()
+    bad[5] = 1.0
+    np.testing.assert_array_equal(jax.jacfwd(force)(jnp.asarray(bad)), np.zeros(7))
 
 
 def test_reverse_mode_is_refused_with_the_way_to_a_gradient(slanted):

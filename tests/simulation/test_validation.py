@@ -35,7 +35,7 @@ BAD = {
     "settings.newton_tol": POS,
     "settings.gap_tol": POS + [2e-3],            # beyond 1 % of the object (0.1 m) nodes sink in unseen
     "grip_slots": [np.array([3, 3]), np.array([-1, 20]), np.array([3, 40]), np.array([1000000, 2])],
-    "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]])],
+    "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]]), np.array([[0.0], [-63.0]])],
     "grip.overlap": [np.array([1.4e-3, -1.0]), np.array([NAN, 0.0])],
     "placement.s": [np.array([NAN, 0.2]), np.array([0.0, INF])],
     "adversary.push": POS + [0.1, 0.5],           # as long as the object (0.1 m) or longer: it would crush it
@@ -85,6 +85,19 @@ def test_adversary_step_beyond_its_radius_or_push_is_refused(change):
     p = V.problems(vals)
     assert len(p) == 1 and p[0].startswith("adversary = ") and "push 0.003, radius" in p[0], p
     assert int(jax.jit(V.invalid_index)(vals)) == V.FIELDS.index("adversary")
+
+
+def test_a_fingertip_turning_more_than_ten_turns_over_the_squeeze_is_refused():
+    """rotation = [[1e10, 0], ...] rad/m (a unit slip: 1e7 rad per mm) turned the tips 25 rad in
+    the first step and ended LOST_CONTACT or STALLED with NaN fields; the bound is on
+    sum |c_k| depth^k, the most a polynomial can turn over [0, depth]."""
+    lin = lambda c: dict(GOOD, **{"fingers.rotation": np.array([[c, 0.0], [0.0, 0.0]])})  # noqa: E731
+    assert V.problems(lin(6000.0)) == []                        # 60 rad over depth 0.01 m
+    assert V.problems(lin(-6400.0))[0].startswith("fingers.rotation = ")
+    assert int(jax.jit(V.invalid_index)(lin(1e10))) == V.FIELDS.index("fingers.rotation")
+    quad = dict(GOOD, **{"fingers.rotation": np.array([[6.4e5, 0.0, 0.0], [0.0, 0.0, 0.0]])})
+    assert V.problems(quad)[0].startswith("fingers.rotation")   # 64 rad at the full depth
+    assert V.problems(dict(quad, depth=0.009)) == []            # 51.8 rad
 
 
 def test_first_invalid_wins_and_all_problems_listed():
