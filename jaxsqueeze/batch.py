@@ -60,6 +60,8 @@ def host_devices_flag(n: int | None = None) -> str:
     """The ``XLA_FLAGS`` entry that gives a CPU process ``n`` devices (default: one per core),
     for :func:`split_vmap`. Set it in the environment before JAX is imported, e.g.
     ``os.environ["XLA_FLAGS"] = host_devices_flag()`` at the top of a script."""
+    if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+        raise ValueError(f"host_devices_flag(n={n!r}): n must be an integer >= 1 (or None: one per core)")
     return f"--xla_force_host_platform_device_count={n or cpu_count()}"
 
 
@@ -82,7 +84,16 @@ def split_vmap(fn: Callable, in_axes=0, devices=None) -> Callable:
 
     from .compiler import jit
 
+    if not callable(fn):
+        raise TypeError(f"split_vmap: fn must be a function of the batch members, got {fn!r}")
+    if isinstance(devices, (str, bytes)):
+        raise TypeError(f"split_vmap: devices={devices!r}; pass a list of jax devices (e.g. jax.devices('cpu'))")
     devs = list(devices) if devices is not None else jax.local_devices()
+    if not devs or not all(isinstance(d, jax.Device) for d in devs) or len(set(devs)) != len(devs):
+        raise ValueError(f"split_vmap: devices must be a non-empty list of distinct jax devices, got {devs!r}")
+    for a in jax.tree.leaves(in_axes):
+        if a not in (0, None):
+            raise ValueError(f"split_vmap: in_axes must be 0 or None per argument, got {in_axes!r}")
     n = len(devs)
     inner = jax.vmap(fn, in_axes=in_axes)
     if n == 1:
@@ -91,8 +102,11 @@ def split_vmap(fn: Callable, in_axes=0, devices=None) -> Callable:
     @jit
     def call(*args):
         axes = in_axes if isinstance(in_axes, (tuple, list)) else (in_axes,) * len(args)
-        if any(a not in (0, None) for a in axes):
-            raise ValueError(f"split_vmap: in_axes must be 0 or None per argument, got {in_axes!r}")
+        if len(axes) != len(args):
+            raise ValueError(f"split_vmap: in_axes={in_axes!r} has {len(axes)} entries for {len(args)} arguments")
+        if any(a == 0 and jnp.ndim(x) == 0 for a, arg in zip(axes, args) for x in jax.tree.leaves(arg)):
+            raise ValueError("split_vmap: a batched argument (in_axes 0) has a scalar leaf; batch members are "
+                             "stacked along a leading axis (shape (B, ...))")
         sizes = {x.shape[0] for a, arg in zip(axes, args) if a == 0 for x in jax.tree.leaves(arg)}
         if len(sizes) != 1:
             raise ValueError(f"split_vmap: the batched arguments need one common leading size, got {sorted(sizes)}")

@@ -25,6 +25,8 @@ The cache is trusted code: do not point it at a folder that others can write to.
 """
 from __future__ import annotations
 
+import math
+import numbers
 import os
 
 ENV = "JAXSQUEEZE_CACHE"
@@ -53,8 +55,18 @@ def enable(path: str | os.PathLike | None = None, *, min_compile_time_s: float =
     """
     import jax
 
+    if path is not None and not isinstance(path, (str, os.PathLike)) or path == "":
+        raise TypeError(f"compile_cache.enable: path={path!r} must be a folder name (str or path), or None for "
+                        f"the default ({default_path()})")
+    t = min_compile_time_s
+    if isinstance(t, bool) or not isinstance(t, numbers.Real) or not (math.isfinite(t) and t >= 0):
+        raise ValueError(f"compile_cache.enable: min_compile_time_s={t!r} must be a finite number of seconds >= 0")
     path = os.path.abspath(os.path.expanduser(os.fspath(path))) if path is not None else default_path()
-    os.makedirs(path, exist_ok=True)
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"compile_cache.enable: cannot use {path!r} as the cache folder ({e.strerror}); pass a "
+                         "writable folder") from None
     current = jax.config.jax_compilation_cache_dir
     if current is not None and os.path.abspath(current) == path and enabled() \
             and jax.config.jax_persistent_cache_min_compile_time_secs == min_compile_time_s:

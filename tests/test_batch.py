@@ -80,6 +80,12 @@ for size in (1, 5, 8):          # odd sizes are padded, and the padding dropped
     np.testing.assert_allclose(np.asarray(s), np.asarray(x).sum(1))
     devs = {{d.id for d in y.sharding.device_set}}
     print(json.dumps(dict(size=size, shape=list(y.shape), devices=sorted(devs))))
+for args, msg in (((jnp.float32(2.0), {{"x": jnp.float32(1.0)}}), "scalar leaf"), ((jnp.float32(2.0),), "2 entries for 1")):
+    try:
+        f(*args)
+        raise AssertionError(msg)
+    except ValueError as e:
+        assert msg in str(e), e
 """
 
 
@@ -105,7 +111,20 @@ def test_split_vmap_equals_vmap_on_one_and_two_devices():
     np.testing.assert_array_equal(np.asarray(y), np.asarray(ry))
     np.testing.assert_array_equal(np.asarray(s), np.asarray(rs))
     with pytest.raises(ValueError, match="in_axes"):
-        split_vmap(_split_member, in_axes=(None, 1), devices=jax.local_devices() * 2)(jnp.float32(2.0), {"x": x})
+        split_vmap(_split_member, in_axes=(None, 1))
+    # bad devices, a non-function, a scalar batch, in_axes that do not match the arguments, and
+    # a device count of 0: errors that say so (they failed deep in jax, or divided by zero)
+    dev = jax.local_devices()[0]
+    for kw, match in [(dict(devices=[]), "non-empty list of distinct"), (dict(devices=[dev, dev]), "distinct"),
+                      (dict(devices="cpu"), "devices='cpu'; pass a list")]:
+        with pytest.raises((ValueError, TypeError), match=match):
+            split_vmap(_split_member, **kw)
+    with pytest.raises(TypeError, match="fn must be a function"):
+        split_vmap(3)
+    from jaxsqueeze.batch import host_devices_flag
+    with pytest.raises(ValueError, match="n must be an integer >= 1"):
+        host_devices_flag(0)
+    assert host_devices_flag(3) == "--xla_force_host_platform_device_count=3"
     here = os.path.dirname(os.path.abspath(__file__))
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     out = subprocess.run([sys.executable, "-c", SPLIT_CHILD.format(tests=here)], capture_output=True, text=True,

@@ -5,6 +5,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -89,3 +91,23 @@ def test_default_path_and_idempotence(tmp_path, monkeypatch):
     assert r["x64_kept"]
     assert r["min_time"] == compile_cache.MIN_COMPILE_TIME_S and r["min_size"] == -1
     assert compile_cache.enabled() is None          # this process is untouched
+
+
+@pytest.mark.parametrize("args,kw,error,match", [
+    ((3,), {}, TypeError, "path=3 must be a folder name"),
+    (("",), {}, TypeError, "path='' must be a folder name"),
+    (("FILE",), {}, ValueError, "cannot use .* as the cache folder \\(File exists\\)"),
+    (("DIR",), dict(min_compile_time_s=-1), ValueError, "min_compile_time_s=-1 must be a finite number"),
+    (("DIR",), dict(min_compile_time_s=float("nan")), ValueError, "min_compile_time_s=nan"),
+    (("DIR",), dict(min_compile_time_s="1"), ValueError, "min_compile_time_s='1'"),
+])
+def test_enable_refuses_what_is_not_a_folder_or_a_time(tmp_path, args, kw, error, match):
+    """A file where the folder belongs, an int, '' (it used the working directory) or a negative,
+    NaN or string minimum time: an error naming the argument, before any JAX option changes
+    (so this test process, which never turns the cache on, stays untouched)."""
+    from jaxsqueeze import compile_cache
+    (tmp_path / "FILE").write_text("")
+    args = tuple(str(tmp_path / a) if a in ("FILE", "DIR") else a for a in args)
+    with pytest.raises(error, match=match):
+        compile_cache.enable(*args, **kw)
+    assert compile_cache.enabled() is None
