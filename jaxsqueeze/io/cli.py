@@ -222,6 +222,7 @@ def _plan(spec, out, args, progress) -> int:
     import shutil
     import tempfile
 
+    from ..post.views import json_ready
     from .planning import plan_settings, run_plan
 
     settings = plan_settings(spec.data.get("plan", {}))
@@ -233,7 +234,7 @@ def _plan(spec, out, args, progress) -> int:
         summary = run_plan(spec.scene, settings, tmp, progress=progress.enabled)
         summary["files"] = {k: os.path.join(out, os.path.basename(v)) for k, v in summary["files"].items()}
         with open(os.path.join(tmp, "summary.json"), "w", encoding="utf-8") as f:
-            json.dump(_json_safe(summary), f, indent=2, allow_nan=False)
+            json.dump(json_ready(summary), f, indent=2, allow_nan=False)
         _publish(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -245,25 +246,6 @@ def _plan(spec, out, args, progress) -> int:
               f"{b['status']}; map {summary['map']['squeezes']} squeezes, search {summary['search']['squeezes']}; "
               f"outputs in {out}")
     return 0 if summary["best"]["status"] == "SUCCESS" else 1
-
-
-def _json_safe(x):
-    """JSON-ready copy: numpy scalars/arrays to Python, NaN and infinities to None."""
-    import math
-
-    import numpy as np
-
-    if isinstance(x, dict):
-        return {str(k): _json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_safe(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _json_safe(x.tolist())
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def _publish(tmp: str, out: str) -> None:
@@ -321,7 +303,7 @@ def _simulate(spec, out, args, progress) -> int:
         paths["summary"] = os.path.join(tmp, "summary.json")
         summ["outputs"] = {k: os.path.basename(v) for k, v in paths.items()}
         with open(paths["summary"], "w", encoding="utf-8") as fh:
-            fh.write(json.dumps(_json_safe(summ), indent=2, allow_nan=False))
+            fh.write(json.dumps(views.json_ready(summ), indent=2, allow_nan=False))
             fh.write("\n")
         _publish(tmp, out)
     except BaseException:

@@ -65,19 +65,6 @@ def plan_settings(table: dict) -> PlanSettings:
     return PlanSettings(**out)
 
 
-def _clean(v):
-    """JSON-safe numbers: NaN and infinities become null."""
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    if isinstance(v, (float, np.floating)):
-        return float(v) if math.isfinite(v) else None
-    if isinstance(v, np.integer):
-        return int(v)
-    return v
-
-
 def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> dict:
     """Map, search, squeeze the best grasp, write pictures and ``summary.json`` into ``out``.
 
@@ -89,6 +76,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> 
     from ..plan.search import grasp_map, optimize_placement, quality_of
     from ..post import plots
     from ..post.maps import plot_grasp_map
+    from ..post.views import json_ready
     from ..simulation.scene import Adversary, Placement
 
     P = float(scene.curve().perimeter)
@@ -143,5 +131,5 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> 
                                failure_push_m=float(Q.failure_push(res)),
                                squeeze_status=jsq.Status(int(res.squeeze_status)).name)
     with open(os.path.join(out, "summary.json"), "w", encoding="utf-8") as f:
-        json.dump(_clean(summary), f, indent=2, allow_nan=False)
+        json.dump(json_ready(summary), f, indent=2, allow_nan=False)
     return summary

@@ -278,8 +278,13 @@ def grasp_stability(res, obj, axis: str = "surface", friction: float | None = No
     """
     res = views.trimmed(res)
     c = cone_axes(res, obj, axis=axis, friction=friction)
-    if np.all(np.isnan(c.margin)):
+    if friction is None and _unpack(obj)[3] is None:
         raise ValueError("grasp_stability needs the friction coefficient: pass the Scene or friction=")
+    if np.all(np.isnan(c.margin[-1])):
+        from ..simulation.status import Status
+        raise ValueError(f"grasp_stability: the last row of this {Status(int(res.status)).name} result has no "
+                         "contact with a finite force, so its friction cones have no margin; a stability label "
+                         "needs a squeeze that holds the object at its last row")
 
     def lab(x):
         return "stabilizing" if x > tol else ("breaking" if x < -tol else "neutral")

@@ -91,8 +91,10 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     import meshio
 
     res = views.trimmed(res)
-    path_dir = os.path.abspath(path_dir)
-    os.makedirs(path_dir, exist_ok=True)
+    views.check_object(res, mesh)
+    if not isinstance(name, str) or not name or os.sep in name or name in (".", ".."):
+        raise ValueError(f"name = {name!r}: expected a file name without a folder (e.g. 'squeeze')")
+    path_dir = views.make_folder(path_dir)
     path = os.path.join(path_dir, f"{name}.xdmf")
     cells = [_cells(mesh)]
     with _TimeSeriesWriter(path) as w:
@@ -125,9 +127,11 @@ def write_final_vtu(path, res, mesh) -> str:
     import meshio
 
     res = views.trimmed(res)
-    path = os.path.abspath(path)
-    d = os.path.dirname(path)
-    os.makedirs(d, exist_ok=True)
+    views.check_object(res, mesh)
+    path = views.output_path(path, "VTU file")
+    if os.path.isdir(path) or os.path.splitext(path)[1].lower() not in (".vtu", ".vtk"):
+        raise ValueError(f"VTU file {path!r}: expected a file name ending in .vtu (or .vtk)")
+    views.make_folder(os.path.dirname(path))
     data = row_point_data(res, mesh, -1)
     meshio.write(path, meshio.Mesh(_points3(mesh), [_cells(mesh)],
                                    point_data=data))

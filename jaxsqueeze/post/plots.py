@@ -335,7 +335,8 @@ def save_all(res, scene, outdir) -> dict:
     Returns {name: path}.
     """
     res = views.trimmed(res)
-    os.makedirs(outdir, exist_ok=True)
+    views.check_object(res, scene, "scene")
+    outdir = views.make_folder(outdir)
     mesh = scene.mesh
     figs = dict(deformed=plot_deformed(res, mesh), force_profile=plot_force_profile(res, mesh=mesh),
                 sliding_profile=plot_sliding_profile(res), events=plot_events(res))

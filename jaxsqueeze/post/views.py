@@ -17,6 +17,7 @@ Conventions
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -46,6 +47,42 @@ def trimmed(res):
     from ..simulation.result import trim
 
     return trim(res)
+
+
+def output_path(path, what: str = "output folder") -> str:
+    """``path`` as an absolute str, or an error that says what it must be (a non-empty folder or
+    file name, str or os.PathLike)."""
+    import os
+
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+        raise TypeError(f"{what} = {path!r}: expected a non-empty path (str or pathlib.Path)")
+    return os.path.abspath(os.fspath(path))
+
+
+def make_folder(path, what: str = "output folder") -> str:
+    """:func:`output_path` of a folder, created if missing (ValueError when it cannot be)."""
+    import os
+
+    path = output_path(path, what)
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"{what} {path!r} cannot be created ({e.strerror}); choose a writable folder") from None
+    return path
+
+
+def check_object(res, obj, what: str = "mesh") -> None:
+    """ValueError unless ``obj`` (a mesh, band or scene) has as many boundary nodes as ``res``."""
+    obj = getattr(obj, "mesh", obj)
+    m = len(np.asarray(obj.boundary)) if hasattr(obj, "boundary") else obj.m
+    got = np.shape(res.modes)[-1]
+    if m != got:
+        raise ValueError(f"the {what} has {m} boundary nodes but the result {got}: pass the {what} the result "
+                         "was computed for")
+    u = getattr(res, "displacement", None)
+    if u is not None and hasattr(obj, "n") and np.shape(u)[0] != obj.n:
+        raise ValueError(f"the {what} has {obj.n} nodes but the result's displacement field {np.shape(u)[0]}: pass "
+                         f"the {what} the result was computed for")
 
 
 def row_index(res, row: int) -> int:
@@ -329,8 +366,25 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     return u + (N_all @ g).reshape(-1, 2) * L
 
 
+def json_ready(x):
+    """A JSON-ready copy of ``x``: numpy scalars and arrays as Python numbers and lists, NaN and
+    infinities as None (JSON null), dict keys as strings."""
+    if isinstance(x, dict):
+        return {str(k): json_ready(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_ready(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_ready(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
 def summary(res, scene=None, timings: dict | None = None) -> dict:
-    """Everything a report needs, as JSON-ready Python types.
+    """Everything a report needs, as JSON-ready Python types (:func:`json_ready`: a number that
+    is NaN or infinite, as in a squeeze that failed at its first row, is None).
 
     Keys: status, advice, final_depth [m], target_depth [m] (with a scene), grip_distance [m],
     relative_depth, rows, n_events, events (see :func:`event_table`), event_sequence (letters),
@@ -372,4 +426,4 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
             method=scene.method)
     if timings is not None:
         out["timings"] = {k: float(v) for k, v in timings.items()}
-    return out
+    return json_ready(out)

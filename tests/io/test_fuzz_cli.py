@@ -15,6 +15,7 @@ import pytest
 
 import physics
 from jaxsqueeze.io import cli
+from jaxsqueeze.post import views
 
 try:
     import tomllib
@@ -140,7 +141,7 @@ def test_keyboard_interrupt_is_exit_130_and_leaves_old_outputs(tmp_path, capsys,
 
 
 def test_json_safe_writes_null_for_nan_and_inf():
-    s = cli._json_safe({"a": float("nan"), "b": [np.float64("inf"), 1.0], "c": np.array([1.0, -np.inf])})
+    s = views.json_ready({"a": float("nan"), "b": [np.float64("inf"), 1.0], "c": np.array([1.0, -np.inf])})
     assert json.dumps(s, allow_nan=False) == '{"a": null, "b": [null, 1.0], "c": [1.0, null]}'
 
 

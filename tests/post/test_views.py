@@ -25,3 +25,47 @@ def test_row_displacement_uses_the_recorded_rigid_part():
     uk = views.row_displacement(res, op, k)
     bd = np.asarray(res.boundary_displacement[k])
     np.testing.assert_allclose(uk[np.asarray(res.nodes)], bd, rtol=0, atol=1e-10 * np.abs(bd).max())
+
+
+def test_exports_and_summary_refuse_or_survive_what_a_hostile_caller_passes(tmp_path):
+    """Output paths that are not paths ('' wrote into the working directory, None/3/bytes failed
+    inside os), a VTU name meshio cannot read the format of, an XDMF name with a folder in it,
+    and a mesh or scene of another object (it failed in numpy broadcasting): errors that say
+    what was wrong. A result whose first row has no finite contact angle (a squeeze refused at
+    its first solve) has no grip distance; its summary is still valid JSON (null)."""
+    import dataclasses
+    import json
+
+    import matplotlib
+    import pytest
+    matplotlib.use("Agg")
+    from jaxsqueeze.post import export, plots
+
+    mesh = symmetric_square(0.1, 0.01)
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
+                      fingers=jsq.Fingers(radius=0.01), grip=(nearest(mesh, (0, -0.05)), nearest(mesh, (0, 0.05))),
+                      friction=0.5, depth=0.01)
+    res = jsq.squeeze(scene)
+    for bad in ("", None, 3, b"x"):
+        with pytest.raises(TypeError, match="expected a non-empty path"):
+            export.write_paraview(bad, res, mesh)
+        with pytest.raises(TypeError, match="expected a non-empty path"):
+            plots.save_all(res, scene, bad)
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="cannot be created"):
+        export.write_paraview(tmp_path / "file" / "sub", res, mesh)
+    for name in ("final", "final.xyz", str(tmp_path)):
+        with pytest.raises(ValueError, match="expected a file name ending in .vtu"):
+            export.write_final_vtu(tmp_path / name, res, mesh)
+    with pytest.raises(ValueError, match="name = 'a/b': expected a file name without a folder"):
+        export.write_paraview(tmp_path, res, mesh, name="a/b")
+    other = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02)
+    with pytest.raises(ValueError, match="the mesh has 20 boundary nodes but the result"):
+        export.write_paraview(tmp_path, res, other)
+    with pytest.raises(ValueError, match="the scene has 20 boundary nodes"):
+        plots.save_all(res, scene.replace(mesh=other, grip=(0, 5)), tmp_path / "p")
+    assert export.write_final_vtu(tmp_path / "f.vtu", res, mesh).endswith("f.vtu")
+    blind = dataclasses.replace(res, theta=np.full_like(res.theta, np.nan))
+    s = views.summary(blind, scene)
+    assert s["grip_distance"] is None and s["relative_depth"] is None
+    json.dumps(s, allow_nan=False)
