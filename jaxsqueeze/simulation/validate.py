@@ -544,6 +544,10 @@ def shape_problems(scene) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- mixed units
+#: a depth beyond this share of the object's size gets a warning (linear elasticity far from true)
+DEEP = 0.5
+
+
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> tuple[list[str], list[str]]:
     """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.
 
@@ -564,6 +568,10 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
                      f"{max(radius / size, size / radius):.3g}; {hint}")
     if size is not None and size > 10:
         warns.append(f"the object is {size:g} m across; {hint}")
+    if size is not None and depth is not None and DEEP * size < depth < size:
+        warns.append(f"depth = {depth:g} m is more than {DEEP:.0%} of the object ({size:g} m across): linear "
+                     "elasticity (small strains) is far from true there, and elements may turn inside out "
+                     "unseen; the paper's squeezes stop near 15 %")
     if size is not None and depth is not None and depth < 1e-6 * size:
         warns.append(f"depth = {depth:g} m is below a millionth of the object ({size:g} m); {hint}")
     if size is not None and max_edge is not None and max_edge > size:

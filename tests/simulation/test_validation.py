@@ -235,6 +235,8 @@ def test_mixed_units():
     err, warn = V.unit_problems(size=0.1, radius=0.01, depth=0.01, E=1.0)
     assert not err and any("pascals" in w for w in warn)
     assert V.unit_problems(size=0.1, radius=0.01, depth=0.01, E=1e5) == ([], [])
+    err, warn = V.unit_problems(size=0.1, radius=0.01, depth=0.0999, E=1e5)      # 99.9 %: triangles invert
+    assert not err and any("more than 50% of the object" in w for w in warn)
 
 
 # ----------------------------------------------------------------------------- the front door, as a hostile user
