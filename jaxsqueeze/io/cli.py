@@ -67,7 +67,7 @@ def _parser() -> argparse.ArgumentParser:
 
     def common(sp, default_out=None):
         sp.add_argument("--out", metavar="DIR", default=default_out, required=default_out is None,
-                        help="output folder (created; existing files of the same name are replaced)"
+                        help="output folder: a new or empty one, or an earlier output folder (replaced whole)"
                         + (f"; default {default_out}" if default_out else ""))
         sp.add_argument("--max-edge", type=float, metavar="M", default=None,
                         help="override object.max_edge [m] (coarser = faster)")
@@ -161,12 +161,27 @@ def main(argv=None) -> int:
             signal.signal(signal.SIGTERM, old)
 
 
+#: the files ``run``, ``plan`` and ``demo`` write into ``--out``: the only entries an existing
+#: output folder may hold, since a new run replaces that folder whole
+OUTPUT_FILES = frozenset({"summary.json", "squeeze.xdmf", "squeeze.h5", "final.vtu"} | {
+    f"{name}.png" for name in ("deformed", "force_profile", "sliding_profile", "events", "cones", "map", "best")})
+
+
 def _check_out(out: str) -> None:
-    """``--out`` must be a folder we can create or replace: checked before any work."""
+    """``--out`` must be a folder we can create, or one we may replace: empty or holding only
+    what an earlier run wrote (a run replaces the folder whole, so ``--out .`` or a folder of
+    the user's is refused, never emptied). Checked before any work."""
     from .scenefile import SceneFileError
 
     if os.path.exists(out) and not os.path.isdir(out):
         raise SceneFileError("--out", f"{out} exists and is not a folder")
+    if os.path.isdir(out):
+        foreign = sorted(e.name for e in os.scandir(out) if e.name not in OUTPUT_FILES or not e.is_file())
+        if foreign:
+            shown = ", ".join(foreign[:3]) + (", ..." if len(foreign) > 3 else "")
+            raise SceneFileError("--out", f"{out} holds files that jaxsqueeze did not write ({shown}); a run "
+                                 "replaces its output folder whole, so give a new or empty folder, or an earlier "
+                                 "output folder")
     parent = os.path.dirname(out)
     probe = parent
     while probe and not os.path.exists(probe):
@@ -186,6 +201,9 @@ def _main(args) -> int:
     from . import scenefile
 
     # ---- read and validate everything (and the output folder) before any work
+    if not args.out.strip():
+        raise scenefile.SceneFileError("--out", "an empty path would name the current folder; give an output "
+                                       "folder, e.g. --out results")
     out = os.path.abspath(args.out)
     _check_out(out)
     progress.start("meshing", "reading the scene and meshing")

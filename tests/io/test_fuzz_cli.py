@@ -188,3 +188,25 @@ def test_sigterm_leaves_previous_outputs(tmp_path):
         assert "interrupted" in err and "Traceback" not in err
         assert os.listdir(out) == ["summary.json"] and "A" in (out / "summary.json").read_text()
     assert not [q for q in os.listdir(tmp_path) if ".tmp-" in q]
+
+
+@pytest.mark.parametrize("command", ["run", "plan", "demo"])
+def test_out_never_replaces_a_folder_of_the_users(tmp_path, capsys, monkeypatch, command):
+    """A run replaces its --out folder whole. `--out ""` (the current folder) replaced a whole
+    source tree, .git included, and exit 0; `--out .` or any folder with files a run does not
+    write would have too. Each is now exit 2 before any work, and the folder is untouched."""
+    home = tmp_path / "project"
+    (home / ".git").mkdir(parents=True)
+    (home / "notes.txt").write_text("mine")
+    (home / "summary.json").write_text("{}")
+    scene = tmp_path / "scene.toml"
+    scene.write_text(BASE, encoding="utf-8")
+    monkeypatch.chdir(home)
+    args = ([command] if command == "demo" else [command, str(scene)]) + ["--no-plots", "-q"]
+    for out in ("", " ", ".", str(home), str(tmp_path)):
+        rc = cli.main(args + ["--out", out])
+        err = capsys.readouterr().err
+        assert rc == 2 and "--out" in err, (out, err)
+        assert ("empty path" in err) if not out.strip() else ("did not write" in err), err
+        assert sorted(os.listdir(home)) == [".git", "notes.txt", "summary.json"]
+        assert (home / "notes.txt").read_text() == "mine"
