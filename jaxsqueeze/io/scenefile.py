@@ -469,6 +469,9 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     errs.raise_if_any()
     if rho is not None and depth_given is None:
         depth = rho * _grip_distance(mesh, grip)
+        deep = validate.deep_warning(float(np.max(np.ptp(mesh.points, axis=0))), depth)
+        if deep:
+            warnings.append(deep)
     else:
         depth = depth_given
     scene = None

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -258,6 +259,9 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         op = dataclasses.replace(op, stiffness=stiffness_of(scene.mesh, scene.material, op.G.dtype))
     if concrete:
         check_force_scale(op)
+        deep = validate.deep_warning(float(op.length), float(scene.depth))
+        if deep:
+            warnings.warn(deep, stacklevel=2)
     if concrete and scene.placement is None:
         check_grip(scene, op)
     cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)

@@ -150,6 +150,33 @@ def _r_step(values, xp):
     return ok
 
 
+#: the widest event bracket, as a share of the step: wider, events are placed anywhere in a step
+#: and a step can hold several unresolved ones (they came back as spurious A/B pairs)
+EVENT_SHARE = 0.1
+#: the loosest slip-angle Newton tolerance [rad]
+NEWTON_MAX = 1e-2
+
+
+def _r_event_tol(values, xp):
+    t = _get(values, "settings.event_tol")
+    if t is None:
+        return None
+    t = xp.asarray(t)
+    ok = _finite_pos(xp, t)
+    s = _get(values, "settings.step")
+    if s is not None:             # compared only with a valid step (a bad step is reported once, as step)
+        ok = ok & ((t <= EVENT_SHARE * xp.asarray(s)) | ~_r_step(values, xp))
+    return ok
+
+
+def _r_newton_tol(values, xp):
+    t = _get(values, "settings.newton_tol")
+    if t is None:
+        return None
+    t = xp.asarray(t)
+    return _finite_pos(xp, t) & (t > 10 * _eps(values, t, xp)) & (t <= NEWTON_MAX)
+
+
 def _r_grip(values, xp):
     slots = _get(values, "grip_slots")
     if slots is None:
@@ -239,10 +266,10 @@ RULES: tuple[Rule, ...] = (
     Rule("settings.step", _r_step, "a finite step > 0 m, at most the depth, and above what the depth's "
          f"round-off can resolve ({STEP_RESOLUTION:g} * eps * depth)",
          "use the default (Settings.step=None, depth / 50) or a step of about depth / 50"),
-    Rule("settings.event_tol", _r_positive("settings.event_tol"), "a finite tolerance > 0 m",
-         "use the default (None: step * 1e-4)"),
-    Rule("settings.newton_tol", _r_positive("settings.newton_tol"), "a finite tolerance > 0 rad",
-         "use the default (None)"),
+    Rule("settings.event_tol", _r_event_tol, f"a finite tolerance > 0 m, at most {EVENT_SHARE:g} of the step "
+         "(a wider bracket places events anywhere in a step)", "use the default (None: step * 1e-4)"),
+    Rule("settings.newton_tol", _r_newton_tol, f"a finite tolerance [rad] above 10 * eps (reachable in this "
+         f"precision) and at most {NEWTON_MAX:g} rad", "use the default (None: 1e-11 in float64, 1e-5 in float32)"),
     Rule("settings.gap_tol", _r_gap_tol, f"a finite tolerance > 0 m, at most {GAP_SHARE:g} of the object's size",
          "use the default (None: 1e-9 of the object's size in float64)"),
     Rule("grip", _r_grip, "two different boundary nodes",
@@ -301,6 +328,8 @@ def _context(rule: Rule, values) -> str:
     f = rule.field
     if f == "depth" and values.get("grip_distance") is not None:
         return f" (grip distance {_show(values['grip_distance'])} m)"
+    if f == "settings.event_tol" and values.get("settings.step") is not None:
+        return f" (step {_show(values['settings.step'])} m)"
     if f == "settings.step" and values.get("depth") is not None:
         return f" (depth {_show(values['depth'])} m)"
     if f == "grip":
@@ -548,6 +577,15 @@ def shape_problems(scene) -> list[str]:
 DEEP = 0.5
 
 
+def deep_warning(size: float, depth: float) -> str | None:
+    """The warning for a squeeze deeper than :data:`DEEP` of the object's size [m], or None."""
+    if not DEEP * size < depth < size:
+        return None
+    return (f"depth = {depth:g} m is more than {DEEP:.0%} of the object ({size:g} m across): linear elasticity "
+            "(small strains) is far from true there, and elements may turn inside out unseen; the paper's "
+            "squeezes stop near 15 %")
+
+
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> tuple[list[str], list[str]]:
     """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.
 
@@ -568,10 +606,8 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
                      f"{max(radius / size, size / radius):.3g}; {hint}")
     if size is not None and size > 10:
         warns.append(f"the object is {size:g} m across; {hint}")
-    if size is not None and depth is not None and DEEP * size < depth < size:
-        warns.append(f"depth = {depth:g} m is more than {DEEP:.0%} of the object ({size:g} m across): linear "
-                     "elasticity (small strains) is far from true there, and elements may turn inside out "
-                     "unseen; the paper's squeezes stop near 15 %")
+    if size is not None and depth is not None and deep_warning(size, depth):
+        warns.append(deep_warning(size, depth))
     if size is not None and depth is not None and depth < 1e-6 * size:
         warns.append(f"depth = {depth:g} m is below a millionth of the object ({size:g} m); {hint}")
     if size is not None and max_edge is not None and max_edge > size:
@@ -584,5 +620,5 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
 
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "invalid_index", "problems",
            "raise_if_invalid", "fingertip_overlap", "MAX_ROTATION", "values_of", "check_scene", "history_bytes",
-           "compliance_bytes", "check_costs", "scene_cost_problems", "shape_problems", "unit_problems", "GAP_SHARE",
+           "compliance_bytes", "check_costs", "scene_cost_problems", "shape_problems", "unit_problems", "deep_warning", "DEEP", "GAP_SHARE", "EVENT_SHARE", "NEWTON_MAX",
            "boundary_points"]

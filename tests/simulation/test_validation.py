@@ -31,8 +31,8 @@ BAD = {
     "friction": [NAN, INF, -0.1],
     "depth": POS + [0.1, 0.2],                   # 0.1 / 0.2 >= the grip distance: fingertips pass through
     "settings.step": POS + [1e-300, 1e-17, 0.02],  # below the depth's round-off; above the depth
-    "settings.event_tol": POS,
-    "settings.newton_tol": POS,
+    "settings.event_tol": POS + [1e-4],          # wider than a tenth of the step (2e-4): events anywhere in it
+    "settings.newton_tol": POS + [1e-300, 0.5],  # below round-off: never met; half a radian: no tolerance
     "settings.gap_tol": POS + [2e-3],            # beyond 1 % of the object (0.1 m) nodes sink in unseen
     "grip_slots": [np.array([3, 3]), np.array([-1, 20]), np.array([3, 40]), np.array([1000000, 2])],
     "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]]), np.array([[0.0], [-63.0]])],
@@ -257,6 +257,19 @@ def test_wrong_types_and_sizes_are_named(square, change, error, message):
     string arithmetic, a numpy ufunc or an attribute error deep inside before)."""
     with pytest.raises(error, match=message):
         jsq.squeeze(_scene(square, **change))
+
+
+def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
+    """depth 95 % of the object returned SUCCESS with inverted triangles and no word; now the
+    eager squeeze warns, and so does the CLI for a relative_depth (it only checked a depth)."""
+    from jaxsqueeze.io import scenefile
+    with pytest.warns(UserWarning, match="more than 50% of the object"):
+        jsq.squeeze(_scene(square, depth=0.06))
+    text = (b"[object]\nshape = \"rectangle\"\nwidth = 0.1\nheight = 0.1\nmax_edge = 0.02\n[material]\nE = 1e5\n"
+            b"nu = 0.3\nthickness = 0.01\n[fingers]\nradius = 0.01\n[grip]\npoints = [[0.0, -0.05], [0.0, 0.05]]\n"
+            b"[squeeze]\nrelative_depth = 0.9\n")
+    (tmp_path / "s.toml").write_bytes(text)
+    assert any("more than 50% of the object" in w for w in scenefile.load(tmp_path / "s.toml").warnings)
 
 
 def test_squeeze_takes_a_scene_and_an_operator(square):
