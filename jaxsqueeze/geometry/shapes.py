@@ -367,10 +367,20 @@ def _sample_polyline(ring, h) -> np.ndarray:
     return np.concatenate(parts)
 
 
+#: fewest nodes on a curved outline (ellipse, disk, annulus rings)
+MIN_CURVE_NODES = 8
+
+
 def _sample_ellipse(c, a, b, h) -> np.ndarray:
-    """Closed ellipse (semi-axes a, b at c) sampled counterclockwise from angle 0."""
-    return _sample_curve(lambda t: c + np.stack([a * np.cos(t), b * np.sin(t)], axis=1),
-                         0.0, 2 * np.pi, h)
+    """Closed ellipse (semi-axes a, b at c) sampled counterclockwise from angle 0; ValueError
+    naming ``max_edge`` when it leaves fewer than :data:`MIN_CURVE_NODES` nodes."""
+    x = _sample_curve(lambda t: c + np.stack([a * np.cos(t), b * np.sin(t)], axis=1), 0.0, 2 * np.pi, h)
+    if len(x) < MIN_CURVE_NODES:
+        P = float(np.linalg.norm(np.diff(np.vstack([x, x[:1]]), axis=0), axis=1).sum()) if len(x) > 1 else 2 * np.pi * max(a, b)
+        raise ValueError(f"max_edge = {h.max_edge:g} m leaves {len(x)} node(s) on a curved outline about {P:.3g} m "
+                         f"long (semi-axes {a:g}, {b:g} m); use max_edge <= {P / MIN_CURVE_NODES:.3g} m for at least "
+                         f"{MIN_CURVE_NODES} nodes")
+    return x
 
 
 # ----------------------------------------------------------------------------- meshing

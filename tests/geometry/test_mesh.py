@@ -213,6 +213,16 @@ def test_ellipse():
     np.testing.assert_allclose((p[:, 0] / 0.06) ** 2 + (p[:, 1] / 0.03) ** 2, 1.0, rtol=1e-12)
 
 
+@pytest.mark.parametrize("make", [lambda: shapes.disk(0.05, max_edge=1.0), lambda: shapes.annulus(0.05, 0.03, max_edge=1.0),
+                                  lambda: shapes.ellipse(0.06, 0.04, max_edge=0.05)])
+def test_a_curved_outline_needs_eight_nodes(make):
+    """max_edge larger than a disk failed inside the mesher ("Input must have at least three
+    vertices", filed by the CLI under object.vertices); a curved outline of fewer than 8 nodes
+    is not the shape: an error that names max_edge and the largest that works."""
+    with pytest.raises(ValueError, match=r"max_edge = .* leaves \d node\(s\) on a curved outline .* use max_edge <="):
+        make()
+
+
 def test_annulus():
     m = shapes.annulus(0.05, 0.02, 0.004, center=(1.0, 1.0))
     assert len(m.loops) == 2
