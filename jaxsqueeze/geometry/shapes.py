@@ -126,6 +126,8 @@ def annulus(r_outer, r_inner, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
 
 
 def _positive(x, name) -> float:
+    if isinstance(x, (bool, str, bytes)) or np.ndim(x) != 0:
+        raise ValueError(f"{name} must be one positive, finite length in metres; got {x!r}")
     x = float(x)
     if not np.isfinite(x) or x <= 0:
         raise ValueError(f"{name} must be a positive, finite length in metres; got {x}")

@@ -228,7 +228,7 @@ def read(path) -> dict:
     except OSError as e:
         raise SceneFileError("file", f"cannot read {path}: {e.strerror or e}") from None
     try:
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")          # a byte-order mark (Windows editors) is skipped
     except UnicodeDecodeError as e:
         raise SceneFileError("file", f"{path} is not UTF-8 text (byte {e.start}: {raw[e.start:e.start + 1]!r}); "
                              "a scene file is a TOML text file saved as UTF-8") from None

@@ -9,6 +9,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from ..mechanics.fem import METHODS
 from ..mechanics.material import Material
 from ..tracing import as_array, is_concrete, numeric
 from .laws import CONTACT_MODELS, FRICTION_MODELS
@@ -279,11 +280,15 @@ class Scene:
         if not isinstance(s, Settings):
             raise TypeError(f"Scene.settings must be a jsq.Settings, got {type(s).__name__} ({s!r:.60}); "
                             "leave it out for the defaults")
+        if not isinstance(self.method, str) or self.method not in METHODS:
+            raise ValueError(f"method={self.method!r}; choose one of {METHODS}.")
+        if not isinstance(s.fused, (bool, np.bool_)):
+            raise ValueError(f"Settings.fused={s.fused!r} must be True or False.")
         for name in ("capacity", "sliding_capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
             v = getattr(s, name)
             if name in ("capacity", "sliding_capacity") and v is None:
                 continue
-            if not isinstance(v, (int, np.integer)) or v < 1:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"Settings.{name}={v!r} must be a positive integer.")
         if s.capacity is not None and s.capacity < 2:
             raise ValueError("Settings.capacity must be at least 2 (one contact per finger).")

@@ -64,6 +64,11 @@ def test_corpus(name, tmp_path, capsys):
     assert dt < 5.0
 
 
+def _write(path, text):
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
 def test_scene_path_is_a_folder_or_not_utf8_or_missing(tmp_path, capsys):
     assert cli.main(["run", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
     assert capsys.readouterr().err.strip() == f"error: file: {tmp_path} is a folder, not a scene file"
@@ -74,6 +79,11 @@ def test_scene_path_is_a_folder_or_not_utf8_or_missing(tmp_path, capsys):
     assert len(err) == 1 and "not UTF-8" in err[0]
     assert cli.main(["run", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")]) == 2
     assert "no such scene file" in capsys.readouterr().err
+    # a UTF-8 byte-order mark (Windows editors) said "Invalid statement (at line 1, column 1)"
+    from jaxsqueeze.io import scenefile
+    bom = tmp_path / "bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf" + BASE.encode("utf-8"))
+    assert scenefile.load(bom).title == scenefile.load(_write(tmp_path / "plain.toml", BASE)).title
 
 
 def test_out_below_a_file_or_not_writable_is_refused_before_work(tmp_path, capsys):

@@ -251,6 +251,10 @@ def test_mixed_units():
     (dict(fingers=0.01), TypeError, "Scene.fingers must be a jsq.Fingers, got float"),
     (dict(settings=None), TypeError, "Scene.settings must be a jsq.Settings"),
     (dict(settings=jsq.Settings(gap_tol=1.0)), ValueError, "settings.gap_tol = 1.0: expected .* at most 0.01 of the object's size"),
+    (dict(method="Sparse"), ValueError, "method='Sparse'; choose one of"),
+    (dict(method=["sparse"]), ValueError, r"method=\['sparse'\]; choose one of"),
+    (dict(settings=jsq.Settings(fused="no")), ValueError, "Settings.fused='no' must be True or False"),
+    (dict(settings=jsq.Settings(max_steps=True)), ValueError, "Settings.max_steps=True must be a positive integer"),
 ])
 def test_wrong_types_and_sizes_are_named(square, change, error, message):
     """Each fails before any tracing, with the field and what it should be (they reached
