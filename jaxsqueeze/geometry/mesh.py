@@ -66,6 +66,7 @@ class Mesh:
                 caller's node and triangle indices.
         """
         pts, tri = _check_arrays(points, triangles)
+        _check_resolution(pts)
         used = np.unique(tri)  # original index of each kept node
         tri = np.searchsorted(used, tri)
         pts = pts[used]
@@ -153,6 +154,25 @@ def _signed_areas(pts, tri):
     """Signed areas of triangles (t,) [m^2]; positive for counterclockwise."""
     a, b, c = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+#: the coarsest accepted coordinate resolution, as a share of the object's size
+RESOLUTION = 1e-6
+
+
+def _check_resolution(pts) -> None:
+    """Refuse coordinates so far from the origin that float64 cannot resolve the object: the
+    spacing of float64 numbers there, over the object's size, above :data:`RESOLUTION`
+    (at 1e13 m a 0.1 m object had 1 mm of coordinate noise and 4 % force error)."""
+    if not len(pts):
+        return
+    size = float(np.max(np.ptp(pts, axis=0)))
+    far = float(np.max(np.abs(pts)))
+    ulp = float(np.spacing(far))
+    if size > 0 and ulp > RESOLUTION * size:
+        raise ValueError(f"the points lie up to {far:.3g} m from the origin for an object {size:.3g} m across: "
+                         f"float64 resolves them only to {ulp:.3g} m ({ulp / size:.2g} of the object); translate "
+                         "the coordinates near the origin")
 
 
 def _orient(pts, tri, used):

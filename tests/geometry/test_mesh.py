@@ -387,3 +387,14 @@ def test_element_count_guard_before_meshing():
     n_est, m_est = shapes.estimate("rectangle", 0.1, 0.1, max_edge=0.004)
     m = shapes.rectangle(0.1, 0.1, max_edge=0.004)
     assert 0.7 < n_est / len(m.triangles) < 1.4 and 0.7 < m_est / m.m < 1.4
+
+
+def test_coordinates_too_far_from_the_origin_to_resolve_the_object_are_refused():
+    """A 0.1 m square at 1e13 m had 2 mm of coordinate noise (float64 spacing there) and squeezed
+    4 % off with SUCCESS; 1e6 m (map coordinates) resolves it to 1e-10 m and is kept."""
+    m = shapes.rectangle(0.1, 0.1, max_edge=0.02)
+    P, T = m.points + m.offset, m.triangles
+    np.testing.assert_allclose(Mesh.from_arrays(P + 1e6, T).points, m.points, atol=1e-9)
+    for off in (1e9, 1e13):
+        with pytest.raises(ValueError, match="float64 resolves them only to .* translate the coordinates"):
+            Mesh.from_arrays(P + off, T)
