@@ -324,9 +324,14 @@ def _sizing(max_edge, refine_near=None, refine_edge=None, refine_radius=None):
         h.max_edge, h.min_edge, h.refined = h_max, h_max, False
         h.radius, h.count = 0.0, 0
         return h
-    near = np.asarray(refine_near, dtype=np.float64).reshape(-1, 2) if np.size(refine_near) else None
-    if near is None or not np.all(np.isfinite(near)):
+    try:
+        near = np.asarray(refine_near, dtype=np.float64)
+    except (TypeError, ValueError):
+        near = None
+    ok = near is not None and near.size and near.shape[-1] == 2 and near.ndim <= 2 and np.all(np.isfinite(near))
+    if not ok:
         raise ValueError(f"refine_near must be finite (k, 2) points in metres; got {refine_near!r}")
+    near = near.reshape(-1, 2)
     h_min = h_max / 4 if refine_edge is None else _positive(refine_edge, "refine_edge")
     if h_min > h_max:
         raise ValueError(f"refine_edge ({h_min}) must not exceed max_edge ({h_max})")

@@ -659,7 +659,7 @@ def _object(obj, base, grip_points, overrides=(None, None)):
         if not isinstance(f, str):
             raise SceneFileError("object.mesh_file", f"expected a file name, got {_describe(f)}")
         path = f if os.path.isabs(f) else os.path.join(base, f)
-        if not os.path.isfile(path):
+        if not os.path.exists(path):
             raise SceneFileError("object.mesh_file", f"no such file: {path}")
         try:
             return read_mesh(path)

@@ -398,3 +398,10 @@ def test_coordinates_too_far_from_the_origin_to_resolve_the_object_are_refused()
     for off in (1e9, 1e13):
         with pytest.raises(ValueError, match="float64 resolves them only to .* translate the coordinates"):
             Mesh.from_arrays(P + off, T)
+
+
+def test_refine_near_of_the_wrong_shape_is_named():
+    """refine_near=[0, 0, 0] failed with numpy's "cannot reshape array of size 3"."""
+    for bad in ([0.0, 0.0, 0.0], "x", [[0.0, float("nan")]]):
+        with pytest.raises(ValueError, match="refine_near must be finite \\(k, 2\\) points"):
+            shapes.rectangle(0.1, 0.1, max_edge=0.02, refine_near=bad)

@@ -84,6 +84,11 @@ def test_scene_path_is_a_folder_or_not_utf8_or_missing(tmp_path, capsys):
     bom = tmp_path / "bom.toml"
     bom.write_bytes(b"\xef\xbb\xbf" + BASE.encode("utf-8"))
     assert scenefile.load(bom).title == scenefile.load(_write(tmp_path / "plain.toml", BASE)).title
+    # object.mesh_file naming a folder said "no such file"
+    (tmp_path / "meshes").mkdir()
+    text = BASE.split("[object]")[0] + '[object]\nmesh_file = "meshes"\n' + "[material]" + BASE.split("[material]")[1]
+    with pytest.raises(scenefile.SceneFileError, match="object.mesh_file: .*meshes is a folder, not a mesh file"):
+        scenefile.load_text(text, base=str(tmp_path))
 
 
 def test_out_below_a_file_or_not_writable_is_refused_before_work(tmp_path, capsys):
