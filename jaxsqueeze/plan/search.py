@@ -340,11 +340,10 @@ class Search(NamedTuple):
 
 def _check_search(optimizer, steps, starts, budget, init) -> None:
     """ValueError/TypeError for arguments :func:`optimize_placement` cannot use, before any squeeze."""
-    count = _check_count
-    count("steps", steps, 0)
-    count("starts", starts, 1)
+    _check_count("steps", steps, 0)
+    _check_count("starts", starts, 1)
     if budget is not None:
-        count("budget", budget, 1)
+        _check_count("budget", budget, 1)
     if optimizer is not None and not (hasattr(optimizer, "init") and hasattr(optimizer, "update")):
         raise TypeError(f"optimizer={optimizer!r} is not an optax optimizer; pass one such as optax.adam(0.02) "
                         "(or None for that default).")

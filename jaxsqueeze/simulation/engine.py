@@ -561,7 +561,8 @@ def run(model: Model, st: State) -> State:
 def start_push(model: Model, st: State) -> State:
     """Hand a finished squeeze to the adversary phase: λ restarts at 0 from the squeezed state
     (contacts, anchors and forces carry over); only a squeeze that succeeded is pushed, and only
-    by a pusher that can touch it (:func:`push_model`; else INFEASIBLE_GRIP). The first iteration (PRIME) evaluates the push phase's event functions at λ = 0."""
+    by a pusher that can touch it (:func:`push_model`; else INFEASIBLE_GRIP). The first
+    iteration (PRIME) evaluates the push phase's event functions at λ = 0."""
     go = jnp.where(model.margin < 0, Status.INFEASIBLE_GRIP, RUNNING)      # a pusher that cannot touch
     status = jnp.where(st.status == Status.SUCCESS, go, st.status).astype(jnp.int32)
     hist = list(st.hist)

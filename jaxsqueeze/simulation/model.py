@@ -179,8 +179,7 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
         s, angle = grasp.placement
         q, n = boundary.point(_scaled_curve(grasp.curve, L), jnp.asarray(s, dt) / L)
         e0 = (q[0] - q[1]) / jnp.linalg.norm(q[0] - q[1])
-        ca, sa = jnp.cos(angle), jnp.sin(angle)
-        e = jnp.array([ca * e0[0] - sa * e0[1], sa * e0[0] + ca * e0[1]])
+        e = _turn(e0, angle)
         o = q + r[:2, None] * n
         t0, k0 = first_touch(op.points, o[0], -e, r[0])
         t1, k1 = first_touch(op.points, o[1], e, r[1])
@@ -235,9 +234,9 @@ def _turn(n, a):
 
 def push_model(model: Model, grasp: Grasp, st) -> Model:
     """The adversary phase's model, from the squeeze model and its final state: the grasping
-    fingers hold still at the final depth, and a third fingertip, placed on the smooth boundary
-    at arc length s and closed in along its push direction (the inward normal turned by the
-    angle offset) until it touches the deformed object, pushes by λ along that direction.
+    fingers hold still at the final depth, and a third fingertip, placed tangent to the smooth
+    boundary at arc length s and closed in along its push direction (the inward normal turned
+    by the angle offset) until it touches the deformed object, pushes by λ along that direction.
     The pushed point is the material point at arc length s on the squeezed object (its node
     displacements interpolated), and its normal turns as the boundary span there turned."""
     op, L = model.op, model.L

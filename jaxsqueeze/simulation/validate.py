@@ -606,8 +606,9 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
                      f"{max(radius / size, size / radius):.3g}; {hint}")
     if size is not None and size > 10:
         warns.append(f"the object is {size:g} m across; {hint}")
-    if size is not None and depth is not None and deep_warning(size, depth):
-        warns.append(deep_warning(size, depth))
+    deep = deep_warning(size, depth) if size is not None and depth is not None else None
+    if deep:
+        warns.append(deep)
     if size is not None and depth is not None and depth < 1e-6 * size:
         warns.append(f"depth = {depth:g} m is below a millionth of the object ({size:g} m); {hint}")
     if size is not None and max_edge is not None and max_edge > size:
@@ -618,7 +619,7 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> 
     return errors, warns
 
 
-__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "invalid_index", "problems",
-           "raise_if_invalid", "fingertip_overlap", "MAX_ROTATION", "values_of", "check_scene", "history_bytes",
-           "compliance_bytes", "check_costs", "scene_cost_problems", "shape_problems", "unit_problems", "deep_warning", "DEEP", "GAP_SHARE", "EVENT_SHARE", "NEWTON_MAX",
-           "boundary_points"]
+__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
+           "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
+           "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
+           "shape_problems", "unit_problems", "deep_warning", "boundary_points"]
