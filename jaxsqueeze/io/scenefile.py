@@ -718,7 +718,8 @@ def _shape_args(obj, grip_points, overrides=(None, None)):
         args = [_number(f"object.{k}", obj[k], positive=True) for k in req]
         if "center" in obj:
             kw["center"] = _points("object.center", [obj["center"]], count=1)[0]
-    names = {r"refine_edge": "object.refine_edge", r"refine_radius": "object.refine_radius",
+    names = {r"outline edge \d+ [^;]*meets outline edge": "object.vertices",    # (its advice names holes too)
+             r"refine_edge": "object.refine_edge", r"refine_radius": "object.refine_radius",
              r"refine_near": "grip.points", r"max_edge": "object.max_edge", r"center": "object.center",
              r"^hole|holes|hole \d": "object.holes", r"outline|vertices|polygon": "object.vertices"}
     names.update({rf"\b{k}\b": f"object.{k}" for k in req})
