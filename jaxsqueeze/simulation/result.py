@@ -75,7 +75,8 @@ class SqueezeResult:
         or 3 with an adversary (finger 2 pushes).
     push: (k,) adversary push displacement [m] (0 during the squeeze; the squeeze phase's rows
         are those with push 0 before the first positive one).
-    rigid: (k, 3) rigid part g of every row (t_x [m], t_y [m], rotation [rad]).
+    rigid: (k, 3) rigid part g of every row (t_x [m], t_y [m], rotation [rad]), in the
+        compliance build's gauge (README, "Compliance builds").
     events: :class:`EventLog`.
     displacement: (n, 2) displacement of every node at the final depth [m] (None for an
         operator without a field map, or when the operator itself is traced).
