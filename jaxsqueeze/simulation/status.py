@@ -35,7 +35,9 @@ _ADVICE = {
     Status.INVALID_INPUT: ("An input number is invalid (NaN, infinite, out of range or inconsistent); "
                            "result.invalid names it. Fix that field of the scene or its settings."),
     Status.MAX_STEPS: "Step bound reached. Raise Settings.max_steps or the step size.",
-    Status.NEWTON_FAILURE: "Slip-angle Newton did not converge. Lower Settings.step or raise Settings.newton_iters.",
+    Status.NEWTON_FAILURE: ("Slip-angle Newton did not converge. Lower Settings.step or raise Settings.newton_iters; "
+                            "for a frictionless squeeze try another step size or a small Coulomb friction "
+                            "(docs/numerics.md, 5.1)."),
     Status.OVERFLOW: "More contact nodes than slots, or more sliding nodes than Newton slots. Raise Settings.capacity or Settings.sliding_capacity (or leave both at None: an eager squeeze then grows them).",
     Status.NONFINITE: ("A non-finite value appeared: a configuration solve was singular or overflowed. Check the "
                        "grip (two contacts that cannot hold the object, e.g. both on one straight edge), the "
