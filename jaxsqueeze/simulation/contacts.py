@@ -43,8 +43,11 @@ from .laws import FREE, SLIP_NEG, SLIP_POS, STICK
 from .model import Model, gap_to_fingers
 
 #: the rule that holds a frictionless object's indeterminate drift and spin: the weight of
-#: ½|ĝ⊥|² relative to the mean contact stiffness (:func:`_slip_angles`)
-NEUTRAL_REG = 1.0
+#: ½|ĝ⊥|² relative to the mean contact stiffness (:func:`_slip_angles`). It must exceed the
+#: drift mode's negative stiffness (~F/r) at every depth: at 1 the two cancelled 2.5 and 10 mm
+#: into a symmetric square squeeze (a singular Newton system there); 1, 10 and 100 give the
+#: same forces to 5e-6 (docs/numerics.md, 5.1)
+NEUTRAL_REG = 100.0
 #: sliding slots solved in a compact system of this size when they fit (else all S slots)
 COMPACT = 16
 #: the kept inverse is recomputed from the bordered matrix (an O(S³) LU) when its backward
