@@ -262,6 +262,9 @@ class Scene:
             d = np.asarray(self.depth, float)
             if not np.all(np.isfinite(d)) or np.any(d <= 0):
                 raise ValueError(f"depth={self.depth!r} must be a finite squeeze depth > 0 m.")
+        if self.adversary is not None and self.contact == "point":
+            raise ValueError("an Adversary needs contact='segment': point contacts compile out new contacts "
+                             "(event A), so the pusher would pass through the object without touching it.")
         if self.grip is None and self.placement is None:
             raise ValueError("a Scene needs grip=(i, j) (two boundary nodes) or placement=Placement(s=(s0, s1)).")
         if numeric(self.grip) and self.placement is None:

@@ -252,6 +252,7 @@ def test_mixed_units():
     (dict(settings=None), TypeError, "Scene.settings must be a jsq.Settings"),
     (dict(settings=jsq.Settings(gap_tol=1.0)), ValueError, "settings.gap_tol = 1.0: expected .* at most 0.01 of the object's size"),
     (dict(method="Sparse"), ValueError, "method='Sparse'; choose one of"),
+    (dict(contact="point", adversary=jsq.Adversary(s=0.05, push=1e-3)), ValueError, "an Adversary needs contact='segment'"),
     (dict(method=["sparse"]), ValueError, r"method=\['sparse'\]; choose one of"),
     (dict(settings=jsq.Settings(fused="no")), ValueError, "Settings.fused='no' must be True or False"),
     (dict(settings=jsq.Settings(max_steps=True)), ValueError, "Settings.max_steps=True must be a positive integer"),
