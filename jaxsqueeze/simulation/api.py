@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
 import warnings
 
 import jax
@@ -124,39 +123,41 @@ def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
     return values
 
 
-@functools.lru_cache(maxsize=None)
-def batched_simulate(cfg: Config):
-    """:func:`simulate` for one static configuration, with a batching rule: under ``vmap`` on
-    the CPU the members run one after another (``lax.map``), each with its own number of
-    steps, so a batch costs what a loop of single squeezes costs. (A batched
-    ``lax.while_loop`` runs every member's event location at every step, and its small
-    solves one lane at a time: 10–20× slower per grasp.) On an accelerator the batch is
-    vmapped. When only forward-mode tangents are batched (``jax.jacfwd``) it is one squeeze."""
+def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
+    """:func:`simulate` with a batching rule: under ``vmap`` on the CPU the members run one
+    after another (``lax.map``), each with its own number of steps, so a batch costs what a
+    loop of single squeezes costs. (A batched ``lax.while_loop`` runs every member's event
+    location at every step, and its small solves one lane at a time: 10–20× slower per grasp.)
+    On an accelerator the batch is vmapped. When only forward-mode tangents are batched
+    (``jax.jacfwd``) it is one squeeze.
+
+    The rule sees the arguments as a flat list of arrays: ``custom_vmap``'s JVP rule cannot
+    take a pytree with an empty (None) node, such as a band's ``nu`` or an absent placement."""
+    leaves, tree = jax.tree.flatten((op, grasp))
+    rebuild = lambda xs: jax.tree.unflatten(tree, xs)  # noqa: E731
 
     @custom_vmap
-    def run(op, grasp):
-        return simulate(op, grasp, cfg)
+    def run(*xs):
+        return simulate(*rebuild(xs), cfg)
 
     @run.def_vmap
-    def rule(axis_size, in_batched, op, grasp):
-        leaves, tree = jax.tree.flatten((op, grasp))
-        flags = jax.tree.leaves(in_batched)
+    def rule(axis_size, flags, *xs):
         if not any(flags):
-            out = simulate(op, grasp, cfg)
+            out = simulate(*rebuild(xs), cfg)
             return out, jax.tree.map(lambda _: False, out)
         if jax.default_backend() != "cpu":
-            full = [x if f else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x)) for x, f in zip(leaves, flags)]
-            out = jax.vmap(lambda *xs: simulate(*jax.tree.unflatten(tree, xs), cfg))(*full)
+            full = [x if f else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x)) for x, f in zip(xs, flags)]
+            out = jax.vmap(lambda *ys: simulate(*rebuild(ys), cfg))(*full)
             return out, jax.tree.map(lambda _: True, out)
 
         def one(batched):
             it = iter(batched)
-            return simulate(*jax.tree.unflatten(tree, [next(it) if f else x for x, f in zip(leaves, flags)]), cfg)
+            return simulate(*rebuild([next(it) if f else x for x, f in zip(xs, flags)]), cfg)
 
-        out = lax.map(one, [x for x, f in zip(leaves, flags) if f])
+        out = lax.map(one, [x for x, f in zip(xs, flags) if f])
         return out, jax.tree.map(lambda _: True, out)
 
-    return run
+    return run(*leaves)
 
 
 #: the configuration an eager squeeze grew to, by object size, capacity settings and the rest of its configuration
@@ -212,7 +213,7 @@ REVERSE_MODE = (
 @compiler.jit(static_argnames=("cfg",))
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
-    st = batched_simulate(cfg)(op, grasp)
+    st = batched_simulate(op, grasp, cfg)
     return to_result(st, op, grasp), st.F.reshape(-1), st.g
 
 
