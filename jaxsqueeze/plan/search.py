@@ -81,6 +81,26 @@ def _check_quality(summ: Summary, X) -> None:
                          "wherever the squeeze succeeds (check the quality function for 0/0, log(0), inf)")
 
 
+def candidates(X, name: str = "X") -> np.ndarray:
+    """``X`` as finite (k, 3) candidates (s_0 [m], s_1 [m], angle [rad]): from a (k, 3) or
+    (k, 2) array (angle 0), one such row, a :class:`~jaxsqueeze.Placement` or a list of
+    them. ValueError for any other shape, a non-number or a non-finite entry."""
+    if isinstance(X, Placement):
+        X = [X]
+    if isinstance(X, (list, tuple)) and X and all(isinstance(p, Placement) for p in X):
+        X = [np.append(np.asarray(p.s, float), float(p.angle)) for p in X]
+    how = (f"{name} must be finite (k, 3) candidates (s_0, s_1, angle) [m, m, rad], (k, 2) ones (angle 0), "
+           "one such row, or Placement objects")
+    try:
+        x = np.asarray(X, float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}={X!r}: {how}.") from None
+    x = x[None] if x.ndim == 1 else x
+    if x.ndim != 2 or x.shape[1] not in (2, 3) or not len(x) or not np.all(np.isfinite(x)):
+        raise ValueError(f"{name} of shape {np.shape(X)}: {how}.")
+    return np.concatenate([x, np.zeros((len(x), 1))], 1) if x.shape[1] == 2 else x
+
+
 def _placed(scene: Scene, x) -> Scene:
     return scene.replace(grip=None, placement=Placement(s=x[:2], angle=x[2]))
 
@@ -156,7 +176,8 @@ def _evaluate_part(scene: Scene, quality, op, X) -> Summary:
 
 def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "auto", chunk: int = 64,
              progress: bool = True, processes: int | None = None, cache=True) -> Summary:
-    """Summaries of candidates ``X`` (B, 3) = (s_0 [m], s_1 [m], angle [rad]) as numpy arrays (B,).
+    """Summaries of candidates ``X`` (B, 3) = (s_0 [m], s_1 [m], angle [rad]) as numpy arrays (B,)
+    (also (B, 2) with angle 0, or :class:`~jaxsqueeze.Placement` objects: :func:`candidates`).
 
     ``batch``: "vmap" (one compiled ``vmap`` per chunk of ``chunk`` candidates, the last one
     padded: what pays on a GPU), "loop" (one compiled squeeze called per candidate: faster on
@@ -169,7 +190,7 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     squeezed with the :func:`quick` capacities first; those that overflow them once more with
     the scene's own.
     """
-    X = np.atleast_2d(np.asarray(X, float))
+    X = candidates(X)
     _check_count("chunk", chunk, 1)
     if processes is not None:
         _check_count("processes", processes, 1)
@@ -348,11 +369,7 @@ def _check_search(optimizer, steps, starts, budget, init) -> None:
         raise TypeError(f"optimizer={optimizer!r} is not an optax optimizer; pass one such as optax.adam(0.02) "
                         "(or None for that default).")
     if init is not None:
-        x = np.asarray(init, float)
-        x = x[None] if x.ndim == 1 else x
-        if x.ndim != 2 or x.shape[1] not in (2, 3) or not len(x) or not np.all(np.isfinite(x)):
-            raise ValueError(f"init of shape {np.shape(init)} must be finite (k, 2) or (k, 3) starting candidates "
-                             "(s_0, s_1[, angle]) [m, m, rad].")
+        candidates(init, "init")
 
 
 def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimizer=None, steps: int = 40,
@@ -363,7 +380,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     Args:
         scene: the scene (its grip/placement is replaced by the candidates).
         quality: a name in ``QUALITIES`` or a function result → ().
-        init: (k, 2 or 3) starting candidates (s_0, s_1[, angle]); default: the ``starts`` best
+        init: (k, 2 or 3) starting candidates (s_0, s_1[, angle]) or Placements; default: the ``starts`` best
             cells of a coarse map (``coarse_spacing``, default perimeter / 16) on which only the
             pairs that pass the cone test (:func:`candidate_pairs`) are squeezed.
         optimizer: an optax optimizer (default ``optax.adam(0.02)``) acting on the scaled
@@ -400,14 +417,12 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         init = X[order[ok[order]]][:starts]
         if len(init) == 0:
             raise ValueError("no feasible placement on the coarse map: refine coarse_spacing or change the scene")
-    init = np.atleast_2d(np.asarray(init, float))
+    init = candidates(init, "init")
     if budget is not None:
         steps = min(steps, (int(budget) - squeezes) // len(init) - 1)
         if steps < 0:
             raise ValueError(f"budget={budget} squeezes is spent before the search starts ({squeezes} on the "
                              "coarse map): raise the budget or coarsen coarse_spacing")
-    if init.shape[1] == 2:
-        init = np.concatenate([init, np.zeros((len(init), 1))], 1)
     mask = np.array([1.0, 1.0, 1.0 if vary_angle else 0.0])
 
     scale_ = jnp.asarray(scale)

@@ -163,6 +163,15 @@ def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
     loop = plan.evaluate(ellipse, X, batch="loop", progress=False)
     np.testing.assert_array_equal(loop.status, s.status)
     np.testing.assert_allclose(loop.quality, s.quality, rtol=1e-9)
+    # (B, 2) candidates have angle 0 (they used to take s_1 as the angle) and Placements are
+    # candidates; any other width is refused
+    two = plan.evaluate(ellipse, X[:2, :2], batch="loop", progress=False)
+    np.testing.assert_array_equal(two.quality, loop.quality[:2])
+    placed = plan.evaluate(ellipse, plan.Placement(s=X[0, :2]), batch="loop", progress=False)
+    assert placed.quality[0] == loop.quality[0]
+    for bad in (X[:, :1], np.ones((2, 4)), [["a", "b"]], np.zeros((0, 3))):
+        with pytest.raises(ValueError, match=r"must be finite \(k, 3\) candidates"):
+            plan.evaluate(ellipse, bad, progress=False)
     cands = plan.candidate_pairs(ellipse, spacing=P / 12)
     assert len(cands) > 0
     assert np.all(plan.evaluate(ellipse, cands[:2], progress=False).margin >= 0)

@@ -338,10 +338,10 @@ def test_jacfwd_through_a_band_squeeze_matches_central_differences(runs):
 
 def test_placement_search_runs_on_a_band(runs):
     """optimize_placement on the heart band (placement along the band's curve, jacfwd inside):
-    a start from a known good pair stays successful and never gets worse than its start."""
+    a start (a Placement) from a known good pair stays successful and never gets worse than its start."""
     from jaxsqueeze.plan import search
     scene = runs["heart"][0]
-    x0 = np.array([[0.0926, 0.2006]])                  # lobe to lobe across the dimple
+    x0 = jsq.Placement(s=(0.0926, 0.2006))             # lobe to lobe across the dimple
     found = search.optimize_placement(scene, init=x0, steps=2, progress=False)
     steps = found.history[0]
     assert steps[0].status == jsq.Status.SUCCESS and steps[0].quality > 0 and np.isfinite(steps[0].grad_norm)
