@@ -345,7 +345,7 @@ def _report(s, res, out, np) -> str:
     counts = ", ".join(f"{k} {seq.count(k)}" for k in EVENT_LETTERS)
     shown = seq if len(seq) <= 60 else seq[:57] + "..."
     lines.append(f"  events       {s['n_events']} ({counts}): {shown or '-'}")
-    for f in (1, 2):
+    for f in range(len(s["contact_regions"])):
         cr = s["contact_regions"][f"finger{f}"]
         F = s["total_force"][f"finger{f}"]
         regs = "; ".join(

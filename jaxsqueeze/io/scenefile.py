@@ -41,7 +41,7 @@ optional is required; unknown keys, at any level, are errors)::
                                    #   in d [m], highest power first, one row per finger
 
     [grip]                         # exactly one of `nodes` / `points`
-    points = [[-0.005, -0.05], [0.005, 0.05]]   # finger 1 (still), finger 2 (moving): the
+    points = [[-0.005, -0.05], [0.005, 0.05]]   # finger 0 (still), finger 1 (moving): the
                                    #   nearest boundary nodes to these points (user frame)
     # nodes = [12, 57]             # or: mesh node indices on the boundary
 

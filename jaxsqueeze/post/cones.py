@@ -100,7 +100,7 @@ class Stability(NamedTuple):
 
     label: "stabilizing" (the weaker contact's margin grew: the cones turned toward each
         other), "breaking" (it shrank: they turned away) or "neutral" (no turn above ``tol``).
-    finger_labels: (label of finger 1, label of finger 2), by the sign of ``toward`` at the end.
+    finger_labels: (label of finger 0, label of finger 1), by the sign of ``toward`` at the end.
     toward: (2,) final rotation toward the other finger [rad].
     margin: (k, 2) cone margin history [rad]; depth: (k,) [m]; relative_depth: (k,).
     margin_change: (2,) final minus initial margin [rad].

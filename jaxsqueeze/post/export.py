@@ -14,7 +14,8 @@ name                       shape    meaning
 ``contact_force``          (n, 3)   force the fingertip exerts on the node [N]; 0 elsewhere
 ``mode``                   (n,)     -1 interior node, 0 free, 1 stick, 2/3 slip (toward
                                     larger/smaller polar angle)
-``finger``                 (n,)     1 or 2 for a node in contact with that finger, else 0
+``finger``                 (n,)     the finger a node touches: 0, 1 (2: an adversary's
+                                    pusher); -1 for a node in no contact
 ``full_field``             (n,)     1 where ``displacement`` is the exact full field at this row
 ``depth``                  (n,)     the row's squeeze depth [m] (the same at every node)
 =========================  =======  ============================================================
@@ -65,8 +66,8 @@ def row_point_data(res, mesh, row: int, op=None) -> dict:
     F[B] = np.where((modes > 0)[:, None], np.asarray(res.forces[r], float), 0.0)
     mode = np.full(n, -1, np.int32)
     mode[B] = modes
-    finger = np.zeros(n, np.int32)
-    finger[B] = np.where(modes > 0, fg + 1, 0)
+    finger = np.full(n, -1, np.int32)
+    finger[B] = np.where(modes > 0, fg, -1)
     if r == k_last and res.displacement is not None:
         u, full = np.asarray(res.displacement, float), 1
     elif op is not None and op.field is not None:

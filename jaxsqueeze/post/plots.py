@@ -22,9 +22,21 @@ from .views import EVENT_LETTERS, FREE, SLIP_POS, STICK
 MM = 1e3
 STICK_COLOR = "tab:blue"
 SLIP_COLOR = "tab:red"
-FINGER_COLORS = ("tab:green", "tab:purple")
+FINGER_COLORS = ("tab:green", "tab:purple", "tab:orange")     # fingers 0, 1 and an adversary's pusher
 EVENT_MARKERS = {"A": ("o", "tab:green"), "B": ("x", "black"), "C": ("^", "tab:red"), "D": ("v", "tab:blue")}
 DPI = 110
+
+
+def _radii(res, r: int, X, C, rad: float) -> np.ndarray:
+    """(F,) radius [m] of each fingertip at row ``r``: the grasping fingers' ``res.radius``;
+    an adversary's pusher (not stored in the result) from its contact nodes, which lie on its
+    circle (0 when it touches none). X: (m, 2) deformed boundary nodes, C: (F, 2) centres [m],
+    in one frame."""
+    out = np.full(len(C), rad)
+    if len(C) > 2:
+        on = (np.asarray(res.modes[r]) > FREE) & (np.asarray(res.finger[r]) == 2)
+        out[2] = float(np.median(np.linalg.norm(X[on] - C[2], axis=1))) if on.any() else 0.0
+    return out
 
 
 def _boundary_loops(mesh):
@@ -76,12 +88,12 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         C = np.asarray(res.centres[r], float) + np.asarray(mesh.offset, float)
         h = 1.6 * float(res.radius)
         for f in (0, 1):
-            sub = fig.add_subplot(gs[f == 0, 1])   # finger 2 (top of the object) on top
+            sub = fig.add_subplot(gs[f == 0, 1])   # finger 1 (top of the object) on top
             # centre the close-up between the fingertip centre and its contact
             away = C[f] - np.asarray(mesh.offset, float)
             away = away / max(np.linalg.norm(away), 1e-300)
             plot_deformed(res, mesh, r, displacement, zoom=(C[f] - away * float(res.radius), h), ax=sub,
-                          title=f"finger {f + 1} (close-up)", legend=False, forces=forces)
+                          title=f"finger {f} (close-up)", legend=False, forces=forces)
         plot_deformed(res, mesh, r, displacement, ax=ax, title=title, show_nodes=show_nodes, legend="figure",
                       forces=forces)
         return fig
@@ -113,15 +125,17 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     # fingertips
     C = np.asarray(res.centres[r], float) + off
     rad = float(res.radius)
-    for f in (0, 1) if placed else ():
-        ax.add_patch(Circle(C[f] * MM, rad * MM, facecolor=FINGER_COLORS[f], alpha=0.18,
-                            edgecolor=FINGER_COLORS[f], lw=1.5, zorder=4))
+    radii = _radii(res, r, P[B] + ub, C, rad)
+    for f in range(len(C)) if placed else ():
+        if radii[f] > 0:
+            ax.add_patch(Circle(C[f] * MM, radii[f] * MM, facecolor=FINGER_COLORS[f], alpha=0.18,
+                                edgecolor=FINGER_COLORS[f], lw=1.5, zorder=4))
         ax.plot(*(C[f] * MM), "+", color=FINGER_COLORS[f], ms=8, zorder=4)
         if zoom is None:   # label beyond the fingertip, away from the object
             away = C[f] - off
             away = away / max(np.linalg.norm(away), 1e-300)
-            at = (C[f] + away * 1.6 * rad) * MM
-            ax.text(*at, f"finger {f + 1}", ha="center", va="center", fontsize=9,
+            at = (C[f] + away * 1.6 * max(radii[f], 0.5 * rad)) * MM
+            ax.text(*at, f"finger {f}" if f < 2 else "pusher (finger 2)", ha="center", va="center", fontsize=9,
                     color=FINGER_COLORS[f], zorder=5)
             ax.update_datalim([at + away * 0.5 * rad * MM])
     # contact nodes
@@ -151,10 +165,10 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     if forces:
         Fr = np.asarray(res.forces[r], float)
         on = modes > FREE
-        tot = [Fr[on & (fg == f)].sum(axis=0) for f in (0, 1)]
+        tot = [Fr[on & (fg == f)].sum(axis=0) for f in range(len(C))]
         big = max(max(np.linalg.norm(t) for t in tot), 1e-300)
         scale = 0.25 * float(np.max(np.ptp(P, axis=0))) / big
-        for f in (0, 1):
+        for f in range(len(C)):
             k = np.flatnonzero(on & (fg == f))
             if not k.size or not np.linalg.norm(tot[f]) > 0:
                 continue
@@ -204,7 +218,7 @@ def default_rows(res, count: int = 4) -> list[int]:
 
 def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> Figure:
     """Fig. 5 analogue: force density (top) and force direction (bottom) against arc length
-    along the contact, finger 1 (left) and finger 2 (right), one curve per selected row.
+    along the contact, finger 0 (left) and finger 1 (right), one curve per selected row.
 
     ``rows`` defaults to the rows nearest 25, 50, 75 and 100 % of the final depth. Markers
     are nodal values (filled: stick, open: slip); lines are cubic splines through them.
@@ -231,7 +245,7 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
                 st = p.modes == STICK
                 ax.plot(s[st], y[st], "o", color=c, ms=4)
                 ax.plot(s[~st], y[~st], "o", mfc="white", mec=c, ms=4)
-        axs[0, f].set_title(f"Finger {f + 1}")
+        axs[0, f].set_title(f"Finger {f}")
         axs[0, f].set_ylabel("force density [N/m]")
         axs[1, f].set_ylabel("force direction [deg]" if degrees else "force direction [rad]")
         axs[1, f].set_xlabel("arc length along fingertip s [mm]")
@@ -270,7 +284,7 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
                 if mask.any():
                     ax.add_collection(LineCollection(seg[mask], colors=color, linewidths=lw))
         for e in ev:
-            if e["finger"] != f + 1 or e["kind"] not in "CD":
+            if e["finger"] != f or e["kind"] not in "CD":
                 continue
             c = np.flatnonzero(sp.nodes == e["node"])
             if not c.size:
@@ -281,7 +295,7 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
         ax.autoscale_view()
         ax.set_xlabel("relative squeeze depth d / D0 [%]")
         ax.set_ylabel("polar angle of contact node [deg]" if degrees else "polar angle [rad]")
-        ax.set_title(f"Finger {f + 1}: {len(sp.nodes)} nodes touched")
+        ax.set_title(f"Finger {f}: {len(sp.nodes)} nodes touched")
         ax.grid(True, lw=0.3, alpha=0.6)
     axs[1].legend([Line2D([], [], color=STICK_COLOR), Line2D([], [], color=SLIP_COLOR, lw=1.8),
                    Line2D([], [], ls="", marker="^", color=EVENT_MARKERS["C"][1], mec="k"),
@@ -299,7 +313,7 @@ def plot_events(res) -> Figure:
     fig = Figure(figsize=(9, 6), dpi=DPI, layout="constrained")
     axs = fig.subplots(2, 1, sharex=True)
     ev = views.event_table(res)
-    for f, ax in zip((2, 1), axs):          # finger 2 (top of the object) on top
+    for f, ax in zip((1, 0), axs):          # finger 1 (top of the object) on top
         for kind, (mk, col) in EVENT_MARKERS.items():
             sel = [e for e in ev if e["kind"] == kind and e["finger"] == f]
             if sel:
@@ -401,8 +415,8 @@ def plot_cone_rotation(res, obj, axis: str = "surface", friction: float | None =
     x = 100 * c.relative_depth
     for f in (0, 1):
         a1.plot(x, np.degrees(c.toward[:, f]), "-", color=FINGER_COLORS[f], lw=1.6,
-                label=f"finger {f + 1}: {st.finger_labels[f]}")
-        a2.plot(x, np.degrees(c.margin[:, f]), "-", color=FINGER_COLORS[f], lw=1.6, label=f"finger {f + 1}")
+                label=f"finger {f}: {st.finger_labels[f]}")
+        a2.plot(x, np.degrees(c.margin[:, f]), "-", color=FINGER_COLORS[f], lw=1.6, label=f"finger {f}")
     a2.axhline(0.0, color="tab:red", lw=1.0, ls=":", label="cone edge (slip)")
     a1.axhline(0.0, color="0.5", lw=0.8)
     a1.set_xlabel("relative squeeze depth d / D0 [%]")

@@ -102,18 +102,28 @@ def _unit(a):
 def grip_positions(res) -> np.ndarray:
     """(2, 2) positions of the two grip nodes before the squeeze [m] (centroid frame).
 
-    Recovered from the first recorded row: each initial contact lies on its fingertip circle.
+    Recovered from a row where the grip node ``res.grip[f]`` touches finger f (the first such
+    row; the initial touch in a full history): a contact node lies on its fingertip circle, so
+    its position before the squeeze is that point minus the node's recorded displacement. This
+    holds for ``history=False`` results too, whose first row is the end of the squeeze. NaN
+    for a finger whose grip node touches it in no row.
     """
     res = trimmed(res)
-    modes, finger = np.asarray(res.modes[0]), np.asarray(res.finger[0])
-    theta, C = np.asarray(res.theta[0], float), np.asarray(res.centres[0], float)
-    alpha = np.asarray(res.alpha[0], float)
+    modes, finger = np.asarray(res.modes), np.asarray(res.finger)
+    theta, C = np.asarray(res.theta, float), np.asarray(res.centres, float)
+    alpha, U = np.asarray(res.alpha, float), np.asarray(res.boundary_displacement, float)
+    nodes, grip = np.asarray(res.nodes), np.asarray(res.grip)
     r = float(res.radius)
     out = np.full((2, 2), np.nan)
     for f in (0, 1):
-        k = np.flatnonzero((modes > FREE) & (finger == f))
-        if k.size:
-            out[f] = C[f] + r * _unit(theta[k[0]] + alpha[f])
+        slot = np.flatnonzero(nodes == grip[f])
+        if not slot.size:
+            continue
+        k = slot[0]
+        rows = np.flatnonzero((modes[:, k] > FREE) & (finger[:, k] == f))
+        if rows.size:
+            i = rows[0]
+            out[f] = C[i, f] + r * _unit(theta[i, k] + alpha[i, f]) - U[i, k]
     return out
 
 
@@ -161,7 +171,8 @@ def contact_regions(res, row: int = -1, loops=None) -> list[list[dict]]:
         row: recorded row (default: the final state).
         loops: lengths of the boundary loops (``mesh.loops``); default: one closed loop.
     Returns:
-        ``[regions of finger 1, regions of finger 2]``; each region is a dict for one
+        ``[regions of finger 0, regions of finger 1]`` (and of the adversary, finger 2, when
+        the scene has one); each region is a dict for one
         contiguous run of contact nodes along the boundary, in boundary order, with keys
         ``positions`` (boundary positions), ``nodes`` (mesh node ids), ``modes`` (names:
         "stick", "slip+", "slip-"), ``theta`` (polar angles [rad]), ``theta_range``
@@ -175,7 +186,7 @@ def contact_regions(res, row: int = -1, loops=None) -> list[list[dict]]:
     radius = float(res.radius)
     loops = (len(modes),) if loops is None else tuple(int(v) for v in loops)
     out = []
-    for f in (0, 1):
+    for f in range(np.asarray(res.centres).shape[1]):
         regions = []
         for run in _runs((modes > FREE) & (finger == f), loops):
             th = np.unwrap(theta[run])
@@ -226,7 +237,7 @@ def force_profile(res, row: int = -1, finger: int = 0, mesh=None) -> ForceProfil
     res = trimmed(res)
     r = row_index(res, row)
     if finger not in (0, 1):
-        raise ValueError(f"finger must be 0 (finger 1) or 1 (finger 2); got {finger!r}")
+        raise ValueError(f"finger must be 0 (the still finger) or 1 (the squeezing finger); got {finger!r}")
     modes, fg = np.asarray(res.modes[r]), np.asarray(res.finger[r])
     theta = np.asarray(res.theta[r], float)
     F = np.asarray(res.forces[r], float)
@@ -316,7 +327,7 @@ def sliding_profile(res, finger: int = 0) -> SlidingProfile:
     """Polar angle of every contact node of ``finger`` (0 or 1) against depth (Fig. 6)."""
     res = trimmed(res)
     if finger not in (0, 1):
-        raise ValueError(f"finger must be 0 (finger 1) or 1 (finger 2); got {finger!r}")
+        raise ValueError(f"finger must be 0 (the still finger) or 1 (the squeezing finger); got {finger!r}")
     modes, fg = np.asarray(res.modes), np.asarray(res.finger)
     theta = np.asarray(res.theta, float)
     on = (modes > FREE) & (fg == finger)
@@ -333,14 +344,14 @@ def sliding_profile(res, finger: int = 0) -> SlidingProfile:
 # ----------------------------------------------------------------------------- tables
 def event_table(res) -> list[dict]:
     """Events in order: dicts with depth [m], relative_depth, node (mesh id), kind ('A'..'D'),
-    meaning, finger (1 or 2)."""
+    meaning, finger (0 still, 1 squeezing, 2 the adversary's pusher)."""
     res = trimmed(res)
     D0 = grip_distance(res)
     out = []
     for d, n, k, f in zip(*(np.asarray(a) for a in res.events)):
         letter = EVENT_LETTERS[int(k)]
         out.append(dict(depth=float(d), relative_depth=float(d) / D0, node=int(n), kind=letter,
-                        meaning=EVENT_MEANING[letter], finger=int(f) + 1))
+                        meaning=EVENT_MEANING[letter], finger=int(f)))
     return out
 
 
@@ -388,8 +399,8 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
 
     Keys: status, advice, final_depth [m], target_depth [m] (with a scene), grip_distance [m],
     relative_depth, rows, n_events, events (see :func:`event_table`), event_sequence (letters),
-    total_force [N] per finger at the final depth ({"finger1": [fx, fy], "finger2": ...}),
-    contact_regions per finger at the final depth (see :func:`contact_regions`; per finger also
+    total_force [N] per finger at the final depth ({"finger0": [fx, fy], "finger1": ...};
+    "finger2" is an adversary's pusher), contact_regions per finger at the final depth (see :func:`contact_regions`; per finger also
     n_stick, n_slip), grip nodes, scene parameters, and ``timings`` [s] if given.
     """
     res = trimmed(res)
@@ -400,7 +411,7 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     if scene is not None and hasattr(scene.mesh, "loops"):
         loops = scene.mesh.loops
     regions = contact_regions(res, -1, loops=loops)
-    tf = np.asarray(res.total_force)[-1]
+    tf = np.asarray(res.finger_forces)[-1]
     events = event_table(res)
     D0 = grip_distance(res)
     out = dict(
@@ -408,15 +419,15 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
         final_depth=float(res.final_depth), grip_distance=D0,
         relative_depth=float(res.final_depth) / D0, rows=int(len(np.asarray(res.depth))),
         n_events=len(events), event_sequence="".join(e["kind"] for e in events), events=events,
-        total_force={f"finger{f + 1}": [float(v) for v in tf[f]] for f in (0, 1)},
-        total_force_magnitude={f"finger{f + 1}": float(np.linalg.norm(tf[f])) for f in (0, 1)},
-        contact_regions={f"finger{f + 1}": dict(
+        total_force={f"finger{f}": [float(v) for v in tf[f]] for f in range(len(tf))},
+        total_force_magnitude={f"finger{f}": float(np.linalg.norm(tf[f])) for f in range(len(tf))},
+        contact_regions={f"finger{f}": dict(
             regions=regions[f], n_stick=sum(g["n_stick"] for g in regions[f]),
-            n_slip=sum(g["n_slip"] for g in regions[f])) for f in (0, 1)},
+            n_slip=sum(g["n_slip"] for g in regions[f])) for f in range(len(regions))},
     )
+    out["grip_nodes"] = [int(v) for v in np.asarray(res.grip)]      # where the fingers first touched
     if scene is not None:
         out["target_depth"] = float(scene.depth)
-        out["grip_nodes"] = [int(v) for v in np.asarray(scene.grip)]
         out["scene"] = dict(
             nodes=int(scene.mesh.n) if hasattr(scene.mesh, "n") else None,
             boundary_nodes=int(len(scene.boundary_nodes())),

@@ -283,6 +283,18 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
     F = np.asarray(res.finger_forces)[-1]
     np.testing.assert_allclose(F.sum(0), 0, atol=1e-7 * np.abs(F).max())     # three-finger balance
     assert float(Q.failure_push(res)) == pytest.approx(0.003)
+    # the pusher is finger 2 in the views too: its contact region, total force and events
+    from jaxsqueeze.post import views
+    s = views.summary(res, sc)
+    np.testing.assert_allclose(s["total_force"]["finger2"], F[2], rtol=1e-12)
+    assert s["contact_regions"]["finger2"]["n_stick"] + s["contact_regions"]["finger2"]["n_slip"] > 0
+    table = views.event_table(res)
+    assert [e["finger"] for e in table] == list(np.asarray(res.events.finger)[:len(table)]) and table[0]["finger"] == 2
+    from matplotlib.patches import Circle
+    from jaxsqueeze.post import plots
+    ax = plots.plot_deformed(res, sc.mesh, details=False).axes[0]
+    radii = sorted(p.radius for p in ax.patches if isinstance(p, Circle))
+    np.testing.assert_allclose(radii, [10.0] * 3, rtol=1e-6)         # [mm]: both fingertips and the pusher
 
 
 def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):

@@ -1,21 +1,28 @@
 """Views rebuild rows from what the engine recorded (issue 9: the rigid part g of every row is in
 the result, so no view refits it)."""
 import numpy as np
+import pytest
 
 import jaxsqueeze as jsq
 from jaxsqueeze.post import views
 from physics import nearest, symmetric_square
 
 
-def test_row_displacement_uses_the_recorded_rigid_part():
-    """The full field rebuilt at the final row equals the engine's own final field, on an
-    off-centre grip (a real rigid rotation)."""
+@pytest.fixture(scope="module")
+def offset():
+    """An off-centre grip on the square (the object turns), squeezed once."""
     mesh = symmetric_square(0.1, 0.01)
     scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
                       fingers=jsq.Fingers(radius=0.01), grip=(nearest(mesh, (-0.01, -0.05)), nearest(mesh, (0.01, 0.05))),
                       friction=0.5, depth=0.01)
     op = scene.operator()
-    res = jsq.squeeze(scene, op, throw=True)
+    return scene, op, jsq.squeeze(scene, op, throw=True)
+
+
+def test_row_displacement_uses_the_recorded_rigid_part(offset):
+    """The full field rebuilt at the final row equals the engine's own final field, on an
+    off-centre grip (a real rigid rotation)."""
+    scene, op, res = offset
     assert abs(float(res.rigid[-1][2])) > 1e-4                 # the object turned
     u = views.row_displacement(res, op, -1)
     ref = np.asarray(res.displacement)
@@ -69,3 +76,24 @@ def test_exports_and_summary_refuse_or_survive_what_a_hostile_caller_passes(tmp_
     s = views.summary(blind, scene)
     assert s["grip_distance"] is None and s["relative_depth"] is None
     json.dumps(s, allow_nan=False)
+
+
+def test_views_read_the_grip_and_fingers_from_the_result(offset):
+    """The grip distance is that of the grip nodes before the squeeze, also for a
+    ``history=False`` result (whose first row is the end of the squeeze: it read 0.0911 m there
+    instead of 0.1005 m); the summary names the grip the squeeze used (a placement's first
+    contacts; it read scene.grip, None for a placed scene); fingers are 0 and 1 in its JSON
+    keys, as in the arrays (event tables: test_symmetric_push_is_resisted_equally_by_both_fingers)."""
+    scene, op, res = offset
+    P = np.asarray(scene.mesh.points)
+    D0 = float(np.linalg.norm(P[scene.grip[1]] - P[scene.grip[0]]))
+    assert views.grip_distance(res) == pytest.approx(D0, rel=1e-12)
+    short = jsq.squeeze(scene, op, history=False)
+    assert float(short.depth[0]) > 0                              # row 0 is not the first touch
+    np.testing.assert_allclose(views.grip_positions(short), views.grip_positions(res), rtol=0, atol=1e-12)
+    assert views.summary(short)["relative_depth"] == pytest.approx(0.01 / D0, rel=1e-12)
+    placed = scene.replace(grip=None, placement=jsq.Placement(s=scene.arc_length(scene.grip)))
+    s = views.summary(res, placed)
+    assert s["grip_nodes"] == [int(g) for g in scene.grip]
+    assert set(s["total_force"]) == set(s["contact_regions"]) == {"finger0", "finger1"}
+    np.testing.assert_allclose(s["total_force"]["finger1"], np.asarray(res.total_force)[-1, 1], rtol=1e-12)

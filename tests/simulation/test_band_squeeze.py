@@ -182,7 +182,7 @@ def test_cli_runs_band_scene(runs, name, tmp_path):
     assert s["relative_depth"] == pytest.approx(SCENES[name][1], rel=1e-9)
     assert s["scene"]["contact"] == "point" and s["grip_nodes"] == list(scene.grip)
     for f in (0, 1):
-        np.testing.assert_allclose(s["total_force"][f"finger{f + 1}"], res.total_force[-1, f], rtol=1e-9)
+        np.testing.assert_allclose(s["total_force"][f"finger{f}"], res.total_force[-1, f], rtol=1e-9)
     with meshio.xdmf.TimeSeriesReader(str(out / "squeeze.xdmf")) as reader:
         points, _ = reader.read_points_cells()
         np.testing.assert_allclose(points[:, :2], scene.mesh.points + scene.mesh.offset)
