@@ -1,7 +1,8 @@
 """Grasp quality measures: pure functions of a :class:`~jaxsqueeze.SqueezeResult` (DESIGN 2.9).
 
 Each works on an eager (trimmed) result, a padded one from ``jit``, inside ``vmap`` and under
-``jax.jacfwd``: it reads only the valid rows (``count``) and uses array operations. Formulas
+``jax.jacfwd``: it reads only the valid rows (``count``) and uses array operations. Given a
+batched result (of ``jax.vmap(squeeze)``) it returns one value per member (:func:`per_result`). Formulas
 (rows k of the result; F_i(k) the total force of finger i on the object, x_i(k) its centre):
 
 * :func:`squeeze_work` — the strain energy stored by the squeeze, ½ Σ_nodes F·u at the last
@@ -25,10 +26,25 @@ Each works on an eager (trimmed) result, a padded one from ``jit``, inside ``vma
 """
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
 
 from ..simulation.laws import FREE, cone_margin
 from ..simulation.result import SqueezeResult, norm
+
+
+def per_result(fn):
+    """``fn`` of one result, mapped (``jax.vmap``) over a batched one: a result of
+    ``jax.vmap(squeeze)`` (``depth`` of shape (B, k)) gives one value per member, (B, ...).
+    Other arguments are shared by the members."""
+    @functools.wraps(fn)
+    def wrapped(res, *args, **kwargs):
+        if jnp.ndim(res.depth) == 2:
+            return jax.vmap(lambda r: fn(r, *args, **kwargs))(res)
+        return fn(res, *args, **kwargs)
+    return wrapped
 
 
 def _rows(res: SqueezeResult):
@@ -44,6 +60,7 @@ def _squeeze_row(res: SqueezeResult):
     return jnp.sum(_rows(res)[1]) - 1
 
 
+@per_result
 def squeeze_work(res: SqueezeResult):
     """() strain energy stored by the squeeze at its last row [J] (see module docstring)."""
     r = _squeeze_row(res)
@@ -51,6 +68,7 @@ def squeeze_work(res: SqueezeResult):
     return 0.5 * jnp.sum(F * u)
 
 
+@per_result
 def grip_force(res: SqueezeResult):
     """() magnitude of the still finger's total force at the last squeeze row [N]."""
     return norm(jnp.asarray(res.finger_forces)[_squeeze_row(res), 0])
@@ -62,6 +80,7 @@ def _softmax(x, mask, tau):
     return big + tau * jnp.log(jnp.sum(jnp.where(mask, jnp.exp((x - big) / tau), 0.0)) + 1e-300)
 
 
+@per_result
 def slip_margin(res: SqueezeResult, friction, tau: float = 0.01):
     """() smooth slip margin of the grasp at its last squeeze row (see module docstring).
 
@@ -94,6 +113,7 @@ def _push_increments(res: SqueezeResult):
     return jnp.asarray(res.finger_forces), dx, step, push
 
 
+@per_result
 def adversary_work(res: SqueezeResult):
     """() work the pusher does on the object during the adversary phase [J] (module docstring)."""
     forces, dx, step, _ = _push_increments(res)
@@ -101,6 +121,7 @@ def adversary_work(res: SqueezeResult):
     return jnp.sum(jnp.where(step, jnp.sum(0.5 * (f[1:] + f[:-1]) * dx, -1), 0.0))
 
 
+@per_result
 def finger_work(res: SqueezeResult):
     """(2,) work each grasping finger resists during the push [J]; they sum to :func:`adversary_work`."""
     forces, dx, step, _ = _push_increments(res)
@@ -112,6 +133,7 @@ def finger_work(res: SqueezeResult):
     return jnp.stack(out)
 
 
+@per_result
 def failure_push(res: SqueezeResult):
     """() push displacement [m] at the last row: where the grasp failed, or the full push."""
     return jnp.asarray(res.push)[res.count - 1]

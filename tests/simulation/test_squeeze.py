@@ -189,6 +189,13 @@ def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
     eager = jsq.squeeze(slanted)
     np.testing.assert_allclose(np.asarray(out.final_forces)[0], eager.final_forces, rtol=1e-10,
                                atol=1e-12 * np.abs(eager.final_forces).max())
+    # a quality of a batched result is one value per member (it was a raw TypeError)
+    from jaxsqueeze.plan import quality
+    work, force = quality.squeeze_work(out), quality.grip_force(out)
+    assert work.shape == force.shape == (3,) and np.all(np.asarray(work)[1:] == 0)
+    np.testing.assert_allclose(work[0], quality.squeeze_work(eager), rtol=1e-10)
+    np.testing.assert_allclose(force[0], eager.grip_force, rtol=1e-10)
+    assert quality.slip_margin(out, slanted.friction).shape == (3,)
 
 
 def test_vmap_over_grips_equals_loop(mesh, centred):
