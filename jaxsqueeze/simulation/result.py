@@ -202,7 +202,7 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
         status=st.status, depth=pad(depth) * L, modes=pad(mode), finger=pad(finger), theta=pad(theta),
         forces=pad(F) * Fs, boundary_displacement=pad(u) * L, centres=pad(C) * L, alpha=pad(alpha),
         rigid=pad(g) * gs, events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
-        g=st.g * gs, count=k, n_events=st.n_ev, nodes=op.nodes,
+        g=st.g * gs, count=k, n_events=jnp.minimum(st.n_ev, ev_d.shape[0]), nodes=op.nodes,
         grip=op.nodes[st.grip], radius=grasp.radius,
         stats=st.stats, invalid=grasp.invalid, push=pad(push) * L, margin=st.margin,
         squeeze_status=st.squeeze_status, push_work=st.work * Fs * L)
@@ -216,6 +216,6 @@ def trim(res: SqueezeResult) -> SqueezeResult:
     """Drop the padding rows of an unbatched result (as numpy arrays: slicing JAX arrays to a
     new length would compile a small program per length). Idempotent."""
     res = jax.tree.map(np.asarray, res)
-    k, e = int(res.count), min(int(res.n_events), len(res.events))
+    k, e = int(res.count), int(res.n_events)
     hist = {f: getattr(res, f)[:k] for f in HISTORY}
     return dataclasses.replace(res, events=EventLog(*(a[:e] for a in res.events)), **hist)

@@ -461,3 +461,17 @@ def test_the_first_squeeze_of_an_object_may_be_a_traced_one(transform):
     g = {"jit": jax.jit(f), "jacfwd": jax.jacfwd(f), "vmap": jax.vmap(f)}[transform]
     jax.make_jaxpr(g)(np.array([0.3, 0.4]) if transform == "vmap" else 0.3)
     assert sc.operator().G.shape == (2 * len(mesh.boundary),) * 2
+
+
+def test_a_full_event_log_ends_the_squeeze_with_event_overflow(slanted):
+    """Settings.max_events=2 on a squeeze with more events: EVENT_OVERFLOW at the row that
+    overfilled the log, which holds the first two events of the full squeeze, and n_events
+    counts the events held (it counted the dropped ones too)."""
+    full = jsq.squeeze(slanted)
+    assert len(full.events) > 2
+    res = jsq.squeeze(slanted.replace(settings=dataclasses.replace(slanted.settings, max_events=2)))
+    assert res.outcome == jsq.Status.EVENT_OVERFLOW and "max_events" in res.outcome.advice
+    assert int(res.n_events) == len(res.events) == 2
+    for a, b in zip(res.events, full.events):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[:2])
+    assert float(res.final_depth) <= float(full.events.depth[2]) + 1e-12
