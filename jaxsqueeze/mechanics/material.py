@@ -6,20 +6,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
-from ..tracing import is_concrete, numeric
-
-
-def _not_a_number(value) -> bool:
-    """True for a concrete text or boolean value (True would pass as 1 Pa); False for numbers,
-    tracers and the placeholders JAX puts in pytree fields (None, ``object()``)."""
-    if value is None or not is_concrete(value):
-        return False
-    if isinstance(value, (str, bytes, bool, np.bool_)):
-        return True
-    try:
-        return np.asarray(value).dtype.kind in "bSUV"
-    except Exception:      # noqa: BLE001  (ragged or odd objects: left to the later checks)
-        return False
+from ..tracing import numeric
 
 
 @jax.tree_util.register_dataclass
@@ -43,8 +30,6 @@ class Material:
             ("thickness", self.thickness, lambda v: v > 0, "thickness must be > 0 m"),
         )
         for name, value, ok, what in checks:
-            if _not_a_number(value):
-                raise ValueError(f"Material.{name}={value!r} is not a number; {what}.")
             if not numeric(value):
                 continue
             v = np.asarray(value, dtype=float)

@@ -536,7 +536,8 @@ def shape_problems(scene) -> list[str]:
     """Eager check that a :class:`~jaxsqueeze.Scene`'s numbers are numbers of the shape one
     squeeze takes (a scalar each, a placement of shape (2,) and a scalar angle;
     :class:`~jaxsqueeze.Fingers` checks its rotation itself): one line per field that is not,
-    naming it. An array where a scalar belongs is a batch, for ``jax.vmap``."""
+    naming it (True and False are not numbers: E=True was 1 Pa). An array where a scalar
+    belongs is a batch, for ``jax.vmap``."""
     s, a = scene.settings, scene.adversary
     fields = {"material.E": scene.material.E, "material.nu": scene.material.nu,
               "material.thickness": scene.material.thickness, "fingers.radius": scene.fingers.radius,
@@ -549,7 +550,7 @@ def shape_problems(scene) -> list[str]:
     for name, value in fields.items():
         if value is None and "." in name and name.split(".")[0] in ("settings", "adversary"):
             continue                                    # None: the default
-        if value is None or isinstance(value, (str, bytes)) or np.asarray(value).dtype.kind not in "biuf":
+        if value is None or isinstance(value, (str, bytes)) or np.asarray(value).dtype.kind not in "iuf":
             out.append(f"{name} = {value!r}: expected a number")
             continue
         x = np.asarray(value, float)

@@ -450,9 +450,6 @@ def test_deform_errors():
     (dict(E=1e6, nu=-1.0, thickness=0.01), "nu"),
     (dict(E=1e6, nu=0.3, thickness=0.0), "thickness"),
     (dict(E=1e6, nu=np.array([0.3, 0.6]), thickness=0.01), "nu"),     # raw numpy "truth value ambiguous"
-    (dict(E="1e6", nu=0.3, thickness=0.01), "E"),
-    (dict(E=True, nu=0.3, thickness=0.01), "E"),                     # passed as 1 Pa
-    (dict(E=1e6, nu=0.3, thickness=[0.01, "x"]), "thickness"),
 ])
 def test_material_validation(kwargs, field):
     with pytest.raises(ValueError, match=rf"Material\.{field}="):
@@ -460,9 +457,11 @@ def test_material_validation(kwargs, field):
 
 
 def test_material_edge_values_accepted():
-    Material(E=1.0, nu=0.5, thickness=1e-6)
-    Material(E=1e9, nu=-0.99, thickness=1.0)
-    Material(E=1e9, nu=np.array([-0.99, 0.0, 0.5]), thickness=1.0)       # a batch of materials
+    """The edges of the ranges are materials (no error), also as a batch of values."""
+    assert Material(E=1.0, nu=0.5, thickness=1e-6).nu == 0.5
+    assert Material(E=1e9, nu=-0.99, thickness=1.0).nu == -0.99
+    batch = Material(E=1e9, nu=np.array([-0.99, 0.0, 0.5]), thickness=1.0)
+    assert batch.nu.shape == (3,)
 
 
 # ----------------------------------------------------------------------------- units (DESIGN 2.3)
