@@ -25,6 +25,9 @@ class Mesh:
             bisector).
         offset: (2,) position of the node centroid in the user's original frame [m];
             ``points + offset`` gives the original coordinates.
+        source: (n,) int64 index of each node among the points given (or in the mesh file),
+            when nodes used by no triangle were dropped and the rest renumbered; None when
+            every node was kept (the numbering is the caller's).
     """
 
     points: np.ndarray
@@ -33,6 +36,7 @@ class Mesh:
     loops: tuple
     normals: np.ndarray
     offset: np.ndarray
+    source: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -50,7 +54,8 @@ class Mesh:
             points: (n, 2) node coordinates [m] in the user's frame.
             triangles: (t, 3) integer node indices.
 
-        Nodes used by no triangle are dropped (the rest keep their order); a consistently
+        Nodes used by no triangle are dropped and the rest renumbered in their order
+        (``source`` maps back to the caller's indices); a consistently
         clockwise mesh is flipped to counterclockwise; points are translated so the node
         centroid is at the origin (``offset`` keeps it). Boundary loops are chained from the
         edges used by one triangle: outer loop (largest enclosed area) first, then holes by
@@ -68,6 +73,7 @@ class Mesh:
         pts, tri = _check_arrays(points, triangles)
         _check_resolution(pts)
         used = np.unique(tri)  # original index of each kept node
+        source = used.astype(np.int64) if len(used) < len(pts) else None
         tri = np.searchsorted(used, tri)
         pts = pts[used]
         tri = _orient(pts, tri, used)
@@ -82,10 +88,10 @@ class Mesh:
         _check_crossing(pts, boundary, loops, used)
         normals = np.concatenate([_loop_normals(pts[lp]) for lp in loops])
         arrays = [pts, tri.astype(np.int64), boundary.astype(np.int64), normals, offset]
-        for a in arrays:
+        for a in arrays + ([source] if source is not None else []):
             a.setflags(write=False)
         pts, tri, boundary, normals, offset = arrays
-        return cls(pts, tri, boundary, tuple(len(lp) for lp in loops), normals, offset)
+        return cls(pts, tri, boundary, tuple(len(lp) for lp in loops), normals, offset, source)
 
     def boundary_index(self, nodes) -> np.ndarray:
         """Positions in ``boundary`` of mesh node indices ``nodes`` (any shape, int64)."""
@@ -349,7 +355,9 @@ def read_mesh(path) -> Mesh:
     """Read a planar triangle mesh from any file format meshio knows (.msh, .vtu, .xdmf, ...).
 
     All ``triangle`` cell blocks are kept, other cells ignored; coordinates are x, y [m]
-    (a z column must be zero). Unused nodes (e.g. of line cells only) are dropped.
+    (a z column must be zero). Unused nodes (e.g. of line cells only, or a circle's centre
+    point) are dropped and the rest renumbered: ``mesh.source`` gives each node's index in the
+    file, and node indices (grips, results) are the mesh's.
 
     Raises:
         ValueError: no triangle cells in the file, or nodes off the z = 0 plane, or any

@@ -43,7 +43,8 @@ optional is required; unknown keys, at any level, are errors)::
     [grip]                         # exactly one of `nodes` / `points`
     points = [[-0.005, -0.05], [0.005, 0.05]]   # finger 0 (still), finger 1 (moving): the
                                    #   nearest boundary nodes to these points (user frame)
-    # nodes = [12, 57]             # or: mesh node indices on the boundary
+    # nodes = [12, 57]             # or: mesh node indices on the boundary (a mesh file with
+                                   #   unused nodes renumbers the rest: use points there)
 
     [squeeze]
     depth = 0.015                  # target squeeze depth [m] > 0; or instead:
@@ -461,6 +462,14 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
         _check_grip_points(errs, mesh, grip_points, grip)
         if grip[0] == grip[1]:
             errs.add(SceneFileError("grip.points", f"both points are nearest to the same boundary node {grip[0]}"))
+    elif getattr(mesh, "source", None) is not None and np.any(mesh.source != np.arange(mesh.n)):
+        dropped = np.setdiff1d(np.arange(int(mesh.source[-1]) + 1), mesh.source)
+        errs.add(SceneFileError("grip.nodes", "the mesh file has nodes used by no triangle (file nodes "
+                                f"{', '.join(map(str, dropped[:8].tolist()))}{' ...' if len(dropped) > 8 else ''}), "
+                                "which are dropped and the rest renumbered, so file node numbers would name other "
+                                "nodes; give grip.points = [[x0, y0], [x1, y1]] instead, or remove the unused nodes "
+                                "from the file"))
+        grip, gkey = tuple(grip_nodes), "grip.nodes"
     else:
         bad = [v for v in grip_nodes if not 0 <= v < mesh.n]
         if bad:

@@ -180,6 +180,34 @@ def test_example_scene_reads_mesh_file():
     np.testing.assert_allclose(p, [[0.0, -0.04], [0.006946, 0.039392]], atol=1e-3)  # nearest nodes
 
 
+def test_grip_nodes_of_a_mesh_file_with_unused_nodes_are_refused(tmp_path):
+    """A mesh file whose node 0 is used by no triangle (gmsh writes a circle's centre): the
+    reader drops it and renumbers the rest (``mesh.source`` maps back), so grip.nodes in the
+    file's numbering named other nodes and squeezed a tilted grip with SUCCESS. It is now an
+    error that says to use grip.points; points, and a file with unused nodes only at its end
+    (nothing renumbered), work."""
+    mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02)
+    pts = np.concatenate([[[0.0, 0.0]], mesh.points + mesh.offset])
+    meshio.write(tmp_path / "first.vtu", meshio.Mesh(np.c_[pts, np.zeros(len(pts))], [("triangle", mesh.triangles + 1)]))
+    read = jsq.read_mesh(tmp_path / "first.vtu")
+    np.testing.assert_array_equal(read.source, np.arange(1, mesh.n + 1))
+    np.testing.assert_allclose(read.points + read.offset, pts[read.source], atol=1e-15)
+    a, b = (int(jsq.scene.nearest_boundary_node(mesh, p)) for p in ((0.0, -0.05), (0.0, 0.05)))
+    body = SCENE[SCENE.index("[material]"):].replace("[[-0.005, -0.05], [0.005, 0.05]]", "[[0.0, -0.05], [0.0, 0.05]]")
+    (tmp_path / "nodes.toml").write_text('[object]\nmesh_file = "first.vtu"\n\n' + body.replace(
+        "points = [[0.0, -0.05], [0.0, 0.05]]", f"nodes = [{a + 1}, {b + 1}]"))
+    with pytest.raises(scenefile.SceneFileError, match="used by no triangle .file nodes 0.*give grip.points"):
+        scenefile.load(tmp_path / "nodes.toml")
+    (tmp_path / "points.toml").write_text('[object]\nmesh_file = "first.vtu"\n\n' + body)
+    assert scenefile.load(tmp_path / "points.toml").scene.grip == (a, b)
+    last = np.roll(pts, -1, axis=0)                        # the unused node at the end
+    meshio.write(tmp_path / "last.vtu", meshio.Mesh(np.c_[last, np.zeros(len(pts))], [("triangle", mesh.triangles)]))
+    assert jsq.read_mesh(tmp_path / "last.vtu").source is not None
+    (tmp_path / "last.toml").write_text('[object]\nmesh_file = "last.vtu"\n\n' + body.replace(
+        "points = [[0.0, -0.05], [0.0, 0.05]]", f"nodes = [{a}, {b}]"))
+    assert scenefile.load(tmp_path / "last.toml").scene.grip == (a, b)
+
+
 # ----------------------------------------------------------------------------- bad scene files
 def _line_only_mesh(tmp_path):
     path = tmp_path / "lines.vtu"
