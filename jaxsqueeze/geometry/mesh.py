@@ -1,6 +1,9 @@
 """Triangle meshes of planar objects (Section II): container, validation, boundary, I/O."""
 from __future__ import annotations
 
+import dataclasses
+import functools
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -8,8 +11,35 @@ import numpy as np
 from .boundary import crossing, neighbours
 
 
+class ByContent:
+    """Equality and hash by the content of a frozen dataclass's fields (arrays by dtype, shape
+    and bytes): an object rebuilt from the same data is the same static part of a pytree, so
+    ``jit`` programs that take a scene (maps, searches) reuse their compilation instead of
+    compiling again for every new, equal mesh object. The digest is computed once."""
+
+    @functools.cached_property
+    def _digest(self) -> bytes:
+        h = hashlib.blake2b(type(self).__name__.encode(), digest_size=20)
+        for f in dataclasses.fields(self):
+            if f.name == "source":             # bookkeeping of the input numbering, not the object
+                continue
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                h.update(f"{f.name}{v.dtype.str}{v.shape}".encode())
+                h.update(np.ascontiguousarray(v).tobytes())
+            else:
+                h.update(f"{f.name}={v!r}".encode())
+        return h.digest()
+
+    def __eq__(self, other) -> bool:
+        return self is other or (type(other) is type(self) and self._digest == other._digest)
+
+    def __hash__(self) -> int:
+        return hash(self._digest)
+
+
 @dataclass(frozen=True, eq=False)
-class Mesh:
+class Mesh(ByContent):
     """A validated triangle mesh of a planar object.
 
     Attributes:
@@ -28,6 +58,8 @@ class Mesh:
         source: (n,) int64 index of each node among the points given (or in the mesh file),
             when nodes used by no triangle were dropped and the rest renumbered; None when
             every node was kept (the numbering is the caller's).
+
+    Two meshes with the same arrays are equal and hash alike (:class:`ByContent`).
     """
 
     points: np.ndarray

@@ -1,4 +1,5 @@
-"""Command line: ``jaxsqueeze run SCENE.toml --out DIR`` and ``jaxsqueeze demo``."""
+"""Command line: ``jaxsqueeze run SCENE.toml --out DIR``, ``jaxsqueeze plan SCENE.toml --out DIR``
+and ``jaxsqueeze demo``."""
 from __future__ import annotations
 
 import argparse
@@ -13,6 +14,7 @@ examples:
   jaxsqueeze demo --out results/foam
   jaxsqueeze run examples/foam_disk.toml --out out/disk
   jaxsqueeze run scene.toml --out out --max-edge 0.008 --verbose
+  jaxsqueeze plan scene.toml --out out/plan  # choose a grasp (see `jaxsqueeze plan --help`)
   python -m jaxsqueeze --help
 
 outputs (in DIR):
@@ -31,6 +33,26 @@ outputs are still written), 2 bad command line or scene file (nothing is written
 Outputs are written into a temporary folder beside DIR and moved in place at the end.
 See docs/errors.md for every status and exit code.
 The scene file format is described in jaxsqueeze.scenefile (python -m pydoc jaxsqueeze.scenefile).
+"""
+
+PLAN_EPILOG = """\
+examples:
+  jaxsqueeze plan examples/foam_disk.toml --out out/plan
+  jaxsqueeze plan scene.toml --out out/plan --max-edge 0.01 --no-plots
+
+The [plan] table of the scene file (optional, every key optional) sets quality, spacing,
+starts, steps, optimizer, learning_rate and an adversary push (push, push_at, push_angle);
+see jaxsqueeze.scenefile.
+
+outputs (in DIR):
+  summary.json        the best grasp (arc lengths, angle, quality, status, forces), the map's
+                      best cells and feasible pairs, every search path
+  map.png             the quality over every pair of finger positions, with the search paths
+  best.png            the deformed object under the best grasp
+
+exit status: 0 the best grasp's squeeze reached its depth, 1 it ended otherwise, 2 bad
+command line or scene file, or no feasible grasp found (nothing is written), 3 internal
+error, 130 interrupted. See docs/errors.md.
 """
 
 
@@ -89,7 +111,7 @@ def _parser() -> argparse.ArgumentParser:
                                     "forward-mode gradients, squeeze the best grasp (the [plan] table of the "
                                     "scene file sets quality, spacing, starts, steps, optimizer, learning_rate "
                                     "and an adversary push). Writes map.png, best.png and summary.json.",
-                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+                        epilog=PLAN_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     pl.add_argument("scene", metavar="SCENE.toml", help="scene file (see jaxsqueeze.scenefile)")
     common(pl)
     d = sub.add_parser("demo", help="squeeze the built-in foam square",
@@ -249,7 +271,7 @@ def _plan(spec, out, args, progress) -> int:
     os.makedirs(parent, exist_ok=True)
     tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)}.tmp-", dir=parent)
     try:
-        summary = run_plan(spec.scene, settings, tmp, progress=progress.enabled)
+        summary = run_plan(spec.scene, settings, tmp, progress=progress.enabled, plots=not args.no_plots)
         summary["files"] = {k: os.path.join(out, os.path.basename(v)) for k, v in summary["files"].items()}
         with open(os.path.join(tmp, "summary.json"), "w", encoding="utf-8") as f:
             json.dump(json_ready(summary), f, indent=2, allow_nan=False)

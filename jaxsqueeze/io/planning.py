@@ -65,8 +65,9 @@ def plan_settings(table: dict) -> PlanSettings:
     return PlanSettings(**out)
 
 
-def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> dict:
-    """Map, search, squeeze the best grasp, write pictures and ``summary.json`` into ``out``.
+def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plots: bool = True) -> dict:
+    """Map, search, squeeze the best grasp, write pictures (unless ``plots`` is False) and
+    ``summary.json`` into ``out``.
 
     Returns the summary (a dict)."""
     import optax
@@ -74,7 +75,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> 
     import jaxsqueeze as jsq
     from ..plan import quality as Q
     from ..plan.search import grasp_map, optimize_placement, quality_of
-    from ..post import plots
+    from ..post import plots as figures
     from ..post.maps import plot_grasp_map
     from ..post.views import json_ready
     from ..simulation.scene import Adversary, Placement
@@ -95,6 +96,9 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> 
         raise ValueError(f"plan.optimizer={settings.optimizer!r} is not an optax optimizer taking a learning "
                          "rate; use e.g. \"adam\", \"sgd\" or \"adabelief\"") from None
     op = scene.operator()
+    if settings.push >= float(op.length):
+        raise ValueError(f"plan.push: expected a push [m] shorter than the object ({float(op.length):.4g} m), "
+                         f"got {settings.push}")
     gmap = grasp_map(scene, qfn, spacing=settings.spacing or P / 24, op=op, progress=progress)
     found = optimize_placement(scene, qfn, optimizer=opt, steps=settings.steps, starts=settings.starts,
                                init=gmap.best[:settings.starts] if len(gmap.best) else None, op=op,
@@ -103,12 +107,12 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True) -> 
     res = jsq.squeeze(best, op=op)
     os.makedirs(out, exist_ok=True)
     paths = {}
-    fig = plot_grasp_map(gmap, found, label=name)
-    paths["map_png"] = os.path.join(out, "map.png")
-    fig.savefig(paths["map_png"])
-    fig = plots.plot_deformed(res, scene.mesh, title=f"best grasp: {name} = {found.quality:.4g}")
-    paths["best_png"] = os.path.join(out, "best.png")
-    fig.savefig(paths["best_png"])
+    if plots:
+        paths["map_png"] = os.path.join(out, "map.png")
+        plot_grasp_map(gmap, found, label=name).savefig(paths["map_png"])
+        paths["best_png"] = os.path.join(out, "best.png")
+        figures.plot_deformed(res, scene.mesh, title=f"best grasp: {name} = {found.quality:.4g}").savefig(
+            paths["best_png"])
     ok = gmap.feasible()
     summary = {
         "quality": name,

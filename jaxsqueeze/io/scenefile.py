@@ -70,6 +70,19 @@ optional is required; unknown keys, at any level, are errors)::
                                    #   for ~2.4 s more compile (jaxsqueeze.Settings.fused)
     precision = "float64"          # float64 | float32 (the CLI sets JAX's precision from it)
 
+    [plan]                         # optional table, read by `jaxsqueeze plan` only (every key optional)
+    quality = "squeeze_work"       # squeeze_work | grip_force | slip_margin | adversary_work
+                                   #   (default: adversary_work with a push, else squeeze_work)
+    spacing = 0.01                 # map grid spacing along the boundary [m] (default perimeter / 24)
+    starts = 5                     # search starts (from the best map cells)
+    steps = 30                     # search iterations per start
+    optimizer = "adam"             # an optax optimizer name
+    learning_rate = 0.02           # its step on the scaled coordinates 2 pi s / perimeter [rad]
+    push = 0.0                     # adversary push [m], 0 (none) <= push < object size
+    push_at = 0.1                  # arc length of the pushed point [m] (default: a quarter of
+                                   #   the perimeter past finger 0 of the [grip], for every grasp)
+    push_angle = 0.0               # pusher direction from the inward normal [rad]
+
 Every problem raises :class:`SceneFileError` whose ``key`` names the offending entry
 (``material.nu``, ``grip.points``, ...), so the message reads ``material.nu: ...``.
 The library's own validation (``Material``, ``Scene``, ``shapes``) is reused and its

@@ -66,6 +66,7 @@ from scipy.interpolate import CubicSpline
 
 from ..geometry.boundary import crossing
 from ..geometry.curves import arclength_params
+from ..geometry.mesh import ByContent
 from ..tracing import as_array
 from .operator import Compliance, FieldMap, rigid_modes
 
@@ -135,7 +136,7 @@ def _length(name: str, v) -> float:
 
 
 @dataclass(frozen=True, eq=False)
-class Band:
+class Band(ByContent):
     """Discretized band on a closed counterclockwise curve (build with the class methods).
 
     Frame (the same convention as :class:`~jaxsqueeze.mesh.Mesh`): ``points`` are translated

@@ -50,7 +50,8 @@ def quality_of(scene: Scene, quality) -> Callable:
     if quality in QUALITIES:
         if quality == "adversary_work" and scene.adversary is None:
             raise ValueError("quality 'adversary_work' needs an Adversary on the scene "
-                             "(scene.replace(adversary=jsq.Adversary(s=..., push=...)))")
+                             "(scene.replace(adversary=jsq.Adversary(s=..., push=...)); in a scene file for "
+                             "`jaxsqueeze plan`: [plan] push = ... [m])")
         return {"squeeze_work": squeeze_work, "grip_force": grip_force, "adversary_work": adversary_work}[quality]
     raise ValueError(f"quality={quality!r}; choose one of {QUALITIES} or pass a function of a result.")
 
@@ -99,6 +100,14 @@ def candidates(X, name: str = "X") -> np.ndarray:
     if x.ndim != 2 or x.shape[1] not in (2, 3) or not len(x) or not np.all(np.isfinite(x)):
         raise ValueError(f"{name} of shape {np.shape(X)}: {how}.")
     return np.concatenate([x, np.zeros((len(x), 1))], 1) if x.shape[1] == 2 else x
+
+
+def _check(scene: Scene, X, op):
+    """The operator without its full-field map (maps keep no fields), after the eager checks
+    of a squeeze of ``scene`` placed at the first candidate: inside a map or a search a bad
+    number would only be a status (INVALID_INPUT in every cell, then "no feasible placement")."""
+    from ..simulation.api import check_scene
+    return dataclasses.replace(check_scene(_placed(scene, X[0]), op), field=None)   # (a static part: identity-hashed)
 
 
 def _placed(scene: Scene, x) -> Scene:
@@ -194,6 +203,7 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     _check_count("chunk", chunk, 1)
     if processes is not None:
         _check_count("processes", processes, 1)
+    op = _check(scene, X, op)
     if batch != "processes":       # (the workers of "processes" loop through this function)
         fast = quick(scene)
         summ = _evaluate(fast, X, quality, op, batch, chunk, progress, processes, cache)
@@ -318,7 +328,7 @@ def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None) -> 
     s = grid(scene, spacing)
     i, j = np.triu_indices(len(s), 1)
     X = np.stack([s[i], s[j], np.full(len(i), _check_angle(angle))], 1)
-    op = scene.operator() if op is None else op
+    op = _check(scene, X, op)
     sc = _placed(scene, X[0])
     cfg = api.config_of(sc)
 
@@ -397,7 +407,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     import optax
 
     _check_search(optimizer, steps, starts, budget, init)
-    op = scene.operator() if op is None else op
+    op = _check(scene, candidates(init, "init") if init is not None else np.zeros((1, 3)), op)
     qfn = quality_of(scene, quality)
     P = float(scene.curve().perimeter)
     scale = np.array([2 * math.pi / P, 2 * math.pi / P, 1.0])

@@ -247,6 +247,41 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     if reverse_mode((scene, op)):
         raise TypeError(REVERSE_MODE)
     concrete = is_concrete(scene)
+    op, grasp = _prepare(scene, op, concrete)
+    cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)
+    res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
+    while concrete and np.ndim(res.status) == 0 and int(res.status) == Status.OVERFLOW:
+        # an automatic capacity ran out: more slots (a new program), remembered for the next
+        # squeeze of this object in this process
+        bigger = _grown(scene, op, cfg, res)
+        if bigger is None:
+            break
+        _GROWN[_grow_key(scene, op, cfg)] = bigger
+        cfg = bigger
+        res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
+    if concrete and scene.placement is not None and np.ndim(res.status) == 0 and \
+            int(res.status) == Status.INVALID_INPUT:
+        nodes = np.asarray(op.nodes)
+        P = np.asarray(op.points) * float(op.length)
+        a, b = (P[np.flatnonzero(nodes == int(g))[0]] for g in np.asarray(res.grip))
+        raise ValueError(f"depth = {float(scene.depth):g} m: expected a depth smaller than the distance between the "
+                         f"fingers' first contacts, {float(np.linalg.norm(a - b)):.4g} m for this placement; "
+                         "squeeze less deep, or place the fingers farther apart.")
+    if op.field is not None:
+        u = field_displacement(op, F_hat, g_hat)
+        u = as_array(np.asarray(u) * np.asarray(op.length), u.dtype) if is_concrete(u) else u * op.length
+        res = dataclasses.replace(res, displacement=u)
+    if trim and np.ndim(res.count) == 0 and is_concrete(res):   # eager, unbatched
+        res = trim_result(res)
+    if throw:
+        res.raise_for_status()
+    return res
+
+
+def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
+    """(operator, grasp) of a squeeze of ``scene``; with ``concrete`` (an eager call) after
+    every eager check, each raising ``ValueError`` that names the field (and warning of a
+    squeeze deeper than half the object)."""
     if concrete:
         bad = validate.shape_problems(scene) or validate.scene_cost_problems(scene)
         if bad:
@@ -262,32 +297,22 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         check_force_scale(op)
         deep = validate.deep_warning(float(op.length), float(scene.depth))
         if deep:
-            warnings.warn(deep, stacklevel=2)
-    if concrete and scene.placement is None:
-        check_grip(scene, op)
-    cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)
+            warnings.warn(deep, stacklevel=3)
+        if scene.placement is None:
+            check_grip(scene, op)
     grasp = grasp_of(scene, op, validated=concrete)
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
-    res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
-    while concrete and np.ndim(res.status) == 0 and int(res.status) == Status.OVERFLOW:
-        # an automatic capacity ran out: more slots (a new program), remembered for the next
-        # squeeze of this object in this process
-        bigger = _grown(scene, op, cfg, res)
-        if bigger is None:
-            break
-        _GROWN[_grow_key(scene, op, cfg)] = bigger
-        cfg = bigger
-        res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
-    if op.field is not None:
-        u = field_displacement(op, F_hat, g_hat)
-        u = as_array(np.asarray(u) * np.asarray(op.length), u.dtype) if is_concrete(u) else u * op.length
-        res = dataclasses.replace(res, displacement=u)
-    if trim and np.ndim(res.count) == 0 and is_concrete(res):   # eager, unbatched
-        res = trim_result(res)
-    if throw:
-        res.raise_for_status()
-    return res
+    return op, grasp
+
+
+def check_scene(scene: Scene, op: Compliance | None = None) -> Compliance:
+    """Every check an eager :func:`squeeze` of ``scene`` makes before it runs, raising as that
+    squeeze would; returns the operator (built when ``op`` is None). For code that squeezes
+    the scene only under tracing (maps and searches), where a bad number would only be a
+    status."""
+    check_types(scene, op)
+    return _prepare(scene, op, True)[0]
 
 
 def check_types(scene, op) -> None:

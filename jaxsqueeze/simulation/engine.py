@@ -131,6 +131,7 @@ class State:
     squeeze_status: jax.Array   # the status the squeeze phase ended with
     margin: jax.Array           # the grip's smooth feasibility margin [rad] (Model.margin)
     grip: jax.Array             # (2,) boundary positions of the first contacts
+    invalid: jax.Array          # () first invalid input (Model.invalid: the grasp's, or a placed grip's depth)
     work: jax.Array             # (3,) push work: by the pusher, resisted by finger 0, finger 1
     ff: jax.Array               # (F, 2) finger totals of the last recorded row
     ff0: jax.Array              # (F, 2) finger totals when the push began
@@ -189,7 +190,7 @@ def init(model: Model) -> State:
         hist=(z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
               z((H, m, 2), dt), z((H, F, 2), dt), z((H, F), dt), z((H, 3), dt), z(H, dt)),
         count=i32(0), stats=Stats(*(i32(0),) * 5, zero, i32(0), i32(0)), squeeze_status=i32(RUNNING),
-        margin=model.margin, grip=model.grip, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt))
+        margin=model.margin, grip=model.grip, invalid=model.invalid, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt))
 
 
 # ----------------------------------------------------------------------------- one iteration

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from ..geometry import boundary
 from ..mechanics.operator import Compliance
 from . import laws
+from .validate import FIELDS
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -216,9 +217,15 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
     present = jnp.arange(F) < 2
     h = grasp.step / L
     eta = jnp.maximum(1e-2 * h, 1e3 * jnp.finfo(dt).eps)   # probe offset, above round-off in float32
+    invalid = jnp.asarray(grasp.invalid, jnp.int32)
+    if cfg.placement:
+        # the depth must stay below the distance between the first contacts (checked before the
+        # squeeze for an integer grip; a placement knows its contacts only after the approach)
+        far = touches & (grasp.depth / L >= jnp.linalg.norm(p[0] - p[1]))
+        invalid = jnp.where((invalid < 0) & far, FIELDS.index("depth"), invalid).astype(jnp.int32)
     return Model(op, cfg, base, dirn, present, r, phi, mu, L, jnp.asarray(grasp.rotation, dt),
                  jnp.array([0.0, 1.0], dt), grip, grasp.depth / L, h, grasp.event_tol / L, grasp.newton_tol,
-                 grasp.gap_tol / L, eta, jnp.asarray(grasp.invalid, jnp.int32), margin, jnp.array(0, jnp.int32), e)
+                 grasp.gap_tol / L, eta, invalid, margin, jnp.array(0, jnp.int32), e)
 
 
 def _scaled_curve(c, L):

@@ -204,7 +204,7 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
         rigid=pad(g) * gs, events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
         g=st.g * gs, count=k, n_events=jnp.minimum(st.n_ev, ev_d.shape[0]), nodes=op.nodes,
         grip=op.nodes[st.grip], radius=grasp.radius,
-        stats=st.stats, invalid=grasp.invalid, push=pad(push) * L, margin=st.margin,
+        stats=st.stats, invalid=st.invalid, push=pad(push) * L, margin=st.margin,
         squeeze_status=st.squeeze_status, push_work=st.work * Fs * L)
 
 

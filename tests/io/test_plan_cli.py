@@ -48,6 +48,14 @@ def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys):
     assert abs(sum(s["best"]["finger_work_J"]) - s["best"]["adversary_work_J"]) < 1e-9 * s["best"]["adversary_work_J"]
     assert s["map"]["squeezes"] > 0 and len(s["search"]["paths"]) >= 1
     assert (out / "map.png").stat().st_size > 0 and (out / "best.png").stat().st_size > 0
+    # --no-plots (a smaller plan, on the compiled programs of this one): no figures
+    small = tmp_path / "small.toml"
+    small.write_text(SCENE.replace("spacing = 0.03", "spacing = 0.08").replace("starts = 2", "starts = 1").replace(
+        "steps = 3", "steps = 1"))
+    bare = tmp_path / "bare"
+    assert cli.main(["plan", str(small), "--out", str(bare), "-q", "--no-plots"]) == 0
+    assert sorted(p.name for p in bare.iterdir()) == ["summary.json"]
+    assert json.loads((bare / "summary.json").read_text())["files"] == {}
 
 
 def test_plan_table_errors_name_the_key(tmp_path, capsys):
@@ -66,3 +74,14 @@ def test_plan_optimizer_that_is_not_an_optimizer_factory_is_an_input_error(tmp_p
     code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
     err = capsys.readouterr().err
     assert code == 2 and "plan.optimizer='apply_updates' is not an optax optimizer" in err, err
+
+
+def test_plan_push_longer_than_the_object_is_an_input_error(tmp_path, capsys):
+    """plan.push of 5 m on a 0.12 m ellipse: exit 2 naming plan.push before any squeeze (every
+    cell of the map was INVALID_INPUT and the search said "no feasible placement")."""
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE.replace("push = 0.002", "push = 5.0"))
+    code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and "error: plan.push: expected a push [m] shorter than the object" in err, err
+    assert not (tmp_path / "o").exists()

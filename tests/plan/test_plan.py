@@ -63,6 +63,15 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
             jsq.grasp_map(ellipse, "squeeze_work", spacing=P / 6, progress=False, **kw)
     with pytest.raises(ValueError, match="spacing=0 must be a finite arc length"):
         jsq.optimize_placement(ellipse, "squeeze_work", coarse_spacing=0, progress=False)
+    # a scene an eager squeeze refuses is refused by maps and searches too (a push longer
+    # than the object was INVALID_INPUT in every cell, then "no feasible placement")
+    far = ellipse.replace(adversary=plan.Adversary(s=0.05, push=5.0))
+    for call in (lambda: plan.evaluate(far, [[0.0, P / 2]], progress=False),
+                 lambda: jsq.grasp_map(far, spacing=P / 6, progress=False),
+                 lambda: jsq.optimize_placement(far, init=[[0.0, P / 2]], progress=False),
+                 lambda: plan.candidate_pairs(ellipse.replace(depth=-1.0), spacing=P / 6)):
+        with pytest.raises(ValueError, match="adversary = .*push 5.0|depth=-1.0 must be"):
+            call()
     assert api._run._cache_size() == before
 
 
@@ -83,6 +92,36 @@ def test_a_quality_that_is_not_one_finite_number_is_named():
                                          r"\(s_0, s_1, angle\) = \[2.0, 2.0, 2.0\]"):
         search._check_quality(summ, np.arange(3)[:, None] * np.ones(3))
     search._check_quality(summ._replace(quality=np.array([np.nan, 1.0, 0.0])), np.zeros((3, 3)))
+
+
+def test_a_placed_squeeze_deeper_than_its_first_contacts_are_apart_is_invalid(ellipse):
+    """A placement's first contacts are known only after the approach: a depth beyond their
+    distance (0.2 m across a 0.12 m ellipse) squeezed the fingers through each other with
+    SUCCESS. It is INVALID_INPUT naming the depth in a map, and an eager squeeze raises."""
+    P = float(ellipse.curve().perimeter)
+    deep = ellipse.replace(depth=0.2)
+    s = plan.evaluate(deep, [[0.0, P / 2]] * 3, batch="vmap", chunk=3, progress=False)     # (a shared program)
+    assert list(s.status) == [jsq.Status.INVALID_INPUT] * 3 and np.all(s.quality == 0)
+    with pytest.raises(ValueError, match=r"depth = 0.2 m: expected a depth smaller than the distance between the "
+                                         r"fingers' first contacts, 0.1\d* m"):
+        jsq.squeeze(deep.replace(placement=plan.Placement(s=(0.0, P / 2))))
+    res = jsq.squeeze(deep.replace(depth=0.006, placement=plan.Placement(s=(0.0, P / 2))))
+    assert res.outcome == jsq.Status.SUCCESS and int(res.invalid) == -1
+
+
+def test_a_rebuilt_equal_scene_reuses_the_compiled_map(ellipse):
+    """Meshes compare by content: the same mesh built again is equal (and hashes alike), so a
+    map of the rebuilt scene reuses the compiled program (every new mesh object compiled the
+    planner's programs again, ~3 s each); another mesh is not equal."""
+    from jaxsqueeze.plan import search
+    again = jsq.shapes.ellipse(0.06, 0.04, max_edge=0.006)
+    assert again is not ellipse.mesh and again == ellipse.mesh and hash(again) == hash(ellipse.mesh)
+    assert jsq.shapes.ellipse(0.06, 0.041, max_edge=0.006) != ellipse.mesh
+    P = float(ellipse.curve().perimeter)
+    first = plan.evaluate(ellipse, [[0.0, P / 2]], batch="loop", progress=False)
+    n = search._one._cache_size()
+    other = plan.evaluate(ellipse.replace(mesh=again), [[0.0, P / 2]], batch="loop", progress=False)
+    assert search._one._cache_size() == n and other.quality[0] == first.quality[0]
 
 
 def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
