@@ -317,8 +317,18 @@ def _simulate(spec, out, args, progress) -> int:
                    f"{len(scene.boundary_nodes())} on the boundary)")
     op = scene.operator()
     progress.start("squeeze", "compiling + squeezing")
-    res = squeeze(scene)
+    import warnings
+    with warnings.catch_warnings(record=True) as caught:     # the library's warnings, as warning: lines
+        warnings.simplefilter("always")
+        res = squeeze(scene)
     progress.done()
+    said = list(spec.warnings)
+    for w in caught:
+        text = str(w.message)
+        if text not in said:
+            said.append(text)
+            if not args.quiet:
+                print(f"warning: {text}", file=sys.stderr)
 
     parent = os.path.dirname(out)
     os.makedirs(parent, exist_ok=True)
@@ -338,8 +348,8 @@ def _simulate(spec, out, args, progress) -> int:
 
         summ = views.summary(res, scene, progress.timings)
         summ = dict(title=spec.title, scene_file=spec.path, precision=spec.precision, **summ)
-        if spec.warnings:
-            summ["warnings"] = list(spec.warnings)
+        if said:
+            summ["warnings"] = said
         paths["summary"] = os.path.join(tmp, "summary.json")
         summ["outputs"] = {k: os.path.basename(v) for k, v in paths.items()}
         with open(paths["summary"], "w", encoding="utf-8") as fh:

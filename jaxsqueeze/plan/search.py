@@ -119,7 +119,7 @@ def _quality(qfn, res):
     q = qfn(res)
     try:
         q = jnp.asarray(q)
-    except TypeError:
+    except (TypeError, ValueError):                  # a string, None, a dict ...
         raise TypeError(f"the quality function returned {q!r}; it must return a number (a () array) "
                         "computed from the result") from None
     if q.shape != () or not (jnp.issubdtype(q.dtype, jnp.floating) or jnp.issubdtype(q.dtype, jnp.integer)):
@@ -279,7 +279,8 @@ def grid(scene: Scene, spacing=None) -> np.ndarray:
     m = scene.mesh.loops[0] if hasattr(scene.mesh, "loops") else scene.mesh.m
     if spacing is None:
         spacing = P / m
-    if not (np.ndim(spacing) == 0 and np.isfinite(float(spacing)) and float(spacing) > 0):
+    if isinstance(spacing, (str, bytes, bool)) or not (np.ndim(spacing) == 0 and np.isreal(spacing)
+                                                       and np.isfinite(float(spacing)) and float(spacing) > 0):
         raise ValueError(f"spacing={spacing!r} must be a finite arc length > 0 m (the outer boundary is {P:.4g} m "
                          f"long; the default is its node spacing, {P / m:.3g} m).")
     n = max(int(round(P / float(spacing))), 3)

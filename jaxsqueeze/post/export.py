@@ -84,7 +84,7 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
 
     Args:
         path_dir: output folder (created if missing).
-        res: squeeze result; mesh: its :class:`~jaxsqueeze.mesh.Mesh`.
+        res: squeeze result; mesh: its :class:`~jaxsqueeze.mesh.Mesh` (or band, or the scene).
         op: optional compliance operator (``scene.operator()``) to write the exact full
             displacement field at every row (see the module docstring).
     Returns the path of the .xdmf file. Read it back with ``meshio.xdmf.TimeSeriesReader``.
@@ -92,7 +92,7 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     import meshio
 
     res = views.trimmed(res)
-    views.check_object(res, mesh)
+    mesh = views.check_object(res, mesh)
     if not isinstance(name, str) or not name or os.sep in name or name in (".", ".."):
         raise ValueError(f"name = {name!r}: expected a file name without a folder (e.g. 'squeeze')")
     path_dir = views.make_folder(path_dir)
@@ -128,7 +128,7 @@ def write_final_vtu(path, res, mesh) -> str:
     import meshio
 
     res = views.trimmed(res)
-    views.check_object(res, mesh)
+    mesh = views.check_object(res, mesh)
     path = views.output_path(path, "VTU file")
     if os.path.isdir(path) or os.path.splitext(path)[1].lower() not in (".vtu", ".vtk"):
         raise ValueError(f"VTU file {path!r}: expected a file name ending in .vtu (or .vtk)")

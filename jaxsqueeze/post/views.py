@@ -8,8 +8,8 @@ Conventions
 -----------
 * Rows index the recorded states of ``res`` (initial touch, every step, every event);
   ``row=-1`` is the final state. Boundary position ``k`` is mesh node ``res.nodes[k]``.
-* Fingers are numbered 0/1 in arguments (as in the result) and 1/2 in tables and JSON
-  (as in the paper).
+* Fingers are numbered 0 (still) and 1 (squeezing) everywhere, in arguments, tables and
+  JSON, as in the result (the paper's fingers 1 and 2); an adversary's pusher is finger 2.
 * Polar angles θ are those of the result: the angle of a contact node about its fingertip
   centre, in the fingertip frame [rad] (for rotating fingertips add ``res.alpha``).
 * The *relative depth* is d / D0 with D0 the distance between the two grip nodes before the
@@ -71,8 +71,9 @@ def make_folder(path, what: str = "output folder") -> str:
     return path
 
 
-def check_object(res, obj, what: str = "mesh") -> None:
-    """ValueError unless ``obj`` (a mesh, band or scene) has as many boundary nodes as ``res``."""
+def check_object(res, obj, what: str = "mesh"):
+    """The mesh or band of ``obj`` (a mesh, band or scene); ValueError unless it has as many
+    boundary nodes as ``res``."""
     obj = getattr(obj, "mesh", obj)
     m = len(np.asarray(obj.boundary)) if hasattr(obj, "boundary") else obj.m
     got = np.shape(res.modes)[-1]
@@ -83,6 +84,7 @@ def check_object(res, obj, what: str = "mesh") -> None:
     if u is not None and hasattr(obj, "n") and np.shape(u)[0] != obj.n:
         raise ValueError(f"the {what} has {obj.n} nodes but the result's displacement field {np.shape(u)[0]}: pass "
                          f"the {what} the result was computed for")
+    return obj
 
 
 def row_index(res, row: int) -> int:

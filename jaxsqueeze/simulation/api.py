@@ -367,8 +367,9 @@ def check_force_scale(op: Compliance) -> None:
     scale = float(np.asarray(op.stiffness, dt) * np.asarray(op.length, dt))
     if not 1e3 * scale < float(np.sqrt(np.finfo(dt).max)):
         raise ValueError(f"the force scale E * thickness * size = {scale:.3g} N is too large for {dt.name} (forces "
-                         f"are squared in magnitudes, largest {float(np.finfo(dt).max):.3g}): check the units of E (Pa) and the thickness (m), or "
-                         "compute in float64 (jax.config.update('jax_enable_x64', True)).")
+                         f"are squared in magnitudes, largest {float(np.finfo(dt).max):.3g}): check the units of E (Pa) "
+                         "and the thickness (m)" + (", or compute in float64 (jax.config.update('jax_enable_x64', "
+                                                    "True))." if dt.itemsize < 8 else "."))
 
 
 def check_grip(scene: Scene, op: Compliance) -> None:

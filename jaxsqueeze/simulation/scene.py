@@ -90,7 +90,9 @@ class Adversary:
 
     s: () arc length [m] of the pushed boundary point (as in :class:`Placement`).
     push: () push displacement [m] > 0, shorter than the object.
-    angle: () push direction offset [rad] from the inward normal at s, |angle| < π/2.
+    angle: () push direction offset [rad] from the inward normal at s; a direction, so
+        periodic in 2π (angle and angle + 2π push alike); pushing needs it within a right
+        angle of the inward normal (cos angle > 0).
     radius: () fingertip radius [m]; None: the grasping fingers' radius.
     step: () push step [m], at most the push and the pusher's radius; None: push / 50.
 
@@ -98,7 +100,7 @@ class Adversary:
     point (tangent to the deformed object there), closes in along its push direction until it
     touches, then moves by the push. Only a squeeze that succeeded is pushed. A pusher that
     cannot touch the object there from outside (its path misses the object or reaches it
-    through the object, as at |angle| ≥ π/2, or it would overlap a grasping fingertip) pushes
+    through the object, as at cos angle ≤ 0, or it would overlap a grasping fingertip) pushes
     nothing: the result's status is ``INFEASIBLE_GRIP`` and ``squeeze_status`` the squeeze's. Needs a continuous :class:`Placement`'s curve, so a
     scene with an adversary is placed by arc length (a grip is converted to one).
     """

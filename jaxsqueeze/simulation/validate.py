@@ -321,7 +321,7 @@ def _show(v) -> str:
     a = np.asarray(v)
     if a.ndim == 0:
         return f"{a.item()!r}"
-    return np.array2string(a, threshold=8, precision=6)
+    return " ".join(np.array2string(a, threshold=8, precision=6, separator=", ").split())     # one line
 
 
 def _context(rule: Rule, values) -> str:
@@ -566,6 +566,12 @@ def shape_problems(scene) -> list[str]:
             out.append(f"grip has shape {g.shape}: one squeeze takes one grip (i, j); for many grips use "
                        "jax.vmap over the scene (or jsq.grasp_map)")
     if scene.placement is not None:
+        for name in ("s", "angle"):
+            v = getattr(scene.placement, name)
+            if isinstance(v, (str, bytes)) or np.asarray(v).dtype.kind not in "iuf":
+                out.append(f"placement.{name} = {v!r}: expected " + ("two arc lengths [m]" if name == "s" else
+                                                                       "a number [rad]"))
+                return out
         shapes = np.shape(scene.placement.s), np.shape(scene.placement.angle)
         if shapes != ((2,), ()):
             out.append(f"an eager squeeze takes one placement: Placement.s of shape (2,) and a scalar angle [rad], "

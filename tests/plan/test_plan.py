@@ -39,6 +39,9 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     for spacing in (-1.0, 0.0, float("nan")):
         with pytest.raises(ValueError, match="finite arc length > 0"):
             jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
+    for spacing in ("0.1", True, 1j):
+        with pytest.raises(ValueError, match="finite arc length > 0"):
+            jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
     with pytest.raises(ValueError, match="more than 10 per boundary node"):
         jsq.grasp_map(ellipse, "squeeze_work", spacing=1e-6)
     with pytest.raises(ValueError, match="one placement"):
@@ -85,6 +88,8 @@ def test_a_quality_that_is_not_one_finite_number_is_named():
         search._quality(lambda r: jnp.ones(3), res)
     with pytest.raises(TypeError, match="returned 'x'; it must return a number"):
         search._quality(lambda r: "x", res)
+    with pytest.raises(TypeError, match="returned None; it must return a number"):
+        search._quality(lambda r: None, res)
     assert search._quality(lambda r: 2.0, res).shape == ()
     ok, bad = int(jsq.Status.SUCCESS), int(jsq.Status.SLIP_FAILURE)
     summ = search.Summary(np.array([bad, ok, ok]), np.array([np.nan, 1.0, np.inf]), *np.zeros((3, 3)))
@@ -341,16 +346,21 @@ def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):
     through it (it pushed the far side), and one placed on a grasping fingertip's contact
     would overlap that fingertip: the push phase ends at once with INFEASIBLE_GRIP, the squeeze
     keeps its SUCCESS, and the push does no work. Turned 0.6 rad the pusher pushes (work > 0),
-    and a push as long as the object is refused before running."""
+    as it does turned 0.6 + 2π (the same direction), and a push as long as the object is
+    refused before running."""
     k = nearest(square.mesh, (0.05, 0.0))
     s3 = float(square.arc_length([k])[0])
     s_grip = float(square.arc_length([square.grip[0]])[0])
-    for s, angle, pushes in ((s3, 0.6, True), (s3, 1.7, False), (s3, np.pi, False), (s_grip, 0.0, False)):
+    work = {}
+    for s, angle, pushes in ((s3, 0.6, True), (s3, 1.7, False), (s3, np.pi, False), (s_grip, 0.0, False),
+                             (s3, 0.6 + 2 * np.pi, True), (s3, 1.7 - 2 * np.pi, False)):    # angles are directions
         res = jsq.squeeze(square.replace(adversary=plan.Adversary(s=s, push=0.003, angle=angle)))
         assert int(res.squeeze_status) == jsq.Status.SUCCESS
         assert (res.outcome == jsq.Status.SUCCESS) == pushes, (s, angle, res.outcome)
         assert pushes or (res.outcome == jsq.Status.INFEASIBLE_GRIP and float(Q.adversary_work(res)) == 0.0)
         assert not pushes or float(Q.adversary_work(res)) > 0
+        work[angle] = float(Q.adversary_work(res))
+    assert work[0.6 + 2 * np.pi] == pytest.approx(work[0.6], rel=1e-9)
     with pytest.raises(ValueError, match="push 0.2, radius 0.01, step 0.004, object size 0.1"):
         jsq.squeeze(square.replace(adversary=plan.Adversary(s=s3, push=0.2)))
 

@@ -72,6 +72,8 @@ def test_exports_and_summary_refuse_or_survive_what_a_hostile_caller_passes(tmp_
     with pytest.raises(ValueError, match="the scene has 20 boundary nodes"):
         plots.save_all(res, scene.replace(mesh=other, grip=(0, 5)), tmp_path / "p")
     assert export.write_final_vtu(tmp_path / "f.vtu", res, mesh).endswith("f.vtu")
+    assert export.write_final_vtu(tmp_path / "s.vtu", res, scene).endswith("s.vtu")      # the scene's mesh
+    assert export.write_paraview(tmp_path / "pv", res, scene).endswith("squeeze.xdmf")
     blind = dataclasses.replace(res, theta=np.full_like(res.theta, np.nan))
     s = views.summary(blind, scene)
     assert s["grip_distance"] is None and s["relative_depth"] is None

@@ -346,3 +346,17 @@ def test_placement_search_runs_on_a_band(runs):
     steps = found.history[0]
     assert steps[0].status == jsq.Status.SUCCESS and steps[0].quality > 0 and np.isfinite(steps[0].grad_norm)
     assert found.quality >= steps[0].quality
+
+
+def test_cli_says_the_library_warnings_as_warning_lines(tmp_path, capsys):
+    """A squeeze deeper than half the band: the library's UserWarning reached the terminal as a
+    raw Python warning with a source line; the CLI prints it as one ``warning:`` line (once)
+    and keeps it in summary.json."""
+    path = tmp_path / "deep.toml"
+    path.write_text(open(_path("heart")).read().replace("relative_depth = 0.10", "relative_depth = 0.6"))
+    out = tmp_path / "out"
+    cli.main(["run", str(path), "--out", str(out), "--no-plots"])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if "more than 50% of the object" in ln]
+    assert len(lines) == 1 and lines[0].startswith("warning: depth = ") and "UserWarning" not in err
+    assert any("more than 50%" in w for w in json.loads((out / "summary.json").read_text())["warnings"])

@@ -110,6 +110,14 @@ def test_first_invalid_wins_and_all_problems_listed():
     assert all(f in str(e.value) for f in ("material.E", "depth", "settings.gap_tol"))
 
 
+def test_a_problem_is_one_line():
+    """A value shown in a problem is on one line (a (2, 1) rotation spread over two 'error:'
+    lines of the CLI)."""
+    rot = np.array([[1e9], [0.0]])
+    p = V.problems({"fingers.rotation": rot, "depth": 0.01})
+    assert len(p) == 1 and "\n" not in p[0] and "[[1.e+09], [0.e+00]]" in p[0]
+
+
 def test_missing_values_are_skipped():
     assert int(V.invalid_index({"material.E": 1.0})) == -1
     # no depth: only > 0 is checked, by both paths (the suite runs with x64 on: 1e-300 is > 0)
@@ -247,6 +255,8 @@ def test_mixed_units():
     (dict(friction=None), ValueError, "friction = None: expected a number"),
     (dict(material=jsq.Material(E=True, nu=0.3, thickness=0.0254)), ValueError, "material.E = True: expected a number"),
     (dict(friction=np.array(True)), ValueError, "friction = array.True.: expected a number"),
+    (dict(grip=None, placement=jsq.Placement(s=(0.0, "0.1"))), ValueError, r"placement.s = \(0.0, '0.1'\): expected two"),
+    (dict(grip=None, placement=jsq.Placement(s=(0.0, 0.1), angle=1j)), ValueError, "placement.angle = 1j: expected a"),
     (dict(fingers=jsq.Fingers(radius="0.01")), ValueError, "fingers.radius = '0.01': expected a number"),
     (dict(grip=("3", "13")), ValueError, "grip = .*expected two integer node indices"),
     (dict(grip=np.array([[3, 13], [1, 11]])), ValueError, r"grip has shape \(2, 2\): one squeeze takes one grip"),
