@@ -408,7 +408,8 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     import optax
 
     _check_search(optimizer, steps, starts, budget, init)
-    op = _check(scene, candidates(init, "init") if init is not None else np.zeros((1, 3)), op)
+    init = None if init is None else candidates(init, "init")
+    op = _check(scene, np.zeros((1, 3)) if init is None else init, op)
     qfn = quality_of(scene, quality)
     P = float(scene.curve().perimeter)
     scale = np.array([2 * math.pi / P, 2 * math.pi / P, 1.0])
@@ -428,7 +429,6 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         init = X[order[ok[order]]][:starts]
         if len(init) == 0:
             raise ValueError("no feasible placement on the coarse map: refine coarse_spacing or change the scene")
-    init = candidates(init, "init")
     if budget is not None:
         steps = min(steps, (int(budget) - squeezes) // len(init) - 1)
         if steps < 0:
