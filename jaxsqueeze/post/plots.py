@@ -284,7 +284,7 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
                 if mask.any():
                     ax.add_collection(LineCollection(seg[mask], colors=color, linewidths=lw))
         for e in ev:
-            if e["finger"] != f or e["kind"] not in "CD":
+            if e["finger"] != f or e["kind"] not in "CD" or e["phase"] != "squeeze":
                 continue
             c = np.flatnonzero(sp.nodes == e["node"])
             if not c.size:
@@ -307,12 +307,12 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
 
 
 def plot_events(res) -> Figure:
-    """Timeline of contact events: depth on x, mesh node on y, one panel per finger and one
-    marker per kind (A ●, B ×, C ▲, D ▼)."""
+    """Timeline of the squeeze's contact events: depth on x, mesh node on y, one panel per
+    finger and one marker per kind (A ●, B ×, C ▲, D ▼)."""
     res = views.trimmed(res)
     fig = Figure(figsize=(9, 6), dpi=DPI, layout="constrained")
     axs = fig.subplots(2, 1, sharex=True)
-    ev = views.event_table(res)
+    ev = [e for e in views.event_table(res) if e["phase"] == "squeeze"]      # (depth is the squeeze's)
     for f, ax in zip((1, 0), axs):          # finger 1 (top of the object) on top
         for kind, (mk, col) in EVENT_MARKERS.items():
             sel = [e for e in ev if e["kind"] == kind and e["finger"] == f]

@@ -345,14 +345,19 @@ def sliding_profile(res, finger: int = 0) -> SlidingProfile:
 
 # ----------------------------------------------------------------------------- tables
 def event_table(res) -> list[dict]:
-    """Events in order: dicts with depth [m], relative_depth, node (mesh id), kind ('A'..'D'),
+    """Events in order: dicts with phase ("squeeze", or "push" for an adversary's push),
+    depth [m] (the squeeze depth; in the push phase the push displacement), relative_depth
+    (depth / D0 in the squeeze phase, None in the push), node (mesh id), kind ('A'..'D'),
     meaning, finger (0 still, 1 squeezing, 2 the adversary's pusher)."""
     res = trimmed(res)
     D0 = grip_distance(res)
+    first = int(res.squeeze_events)
     out = []
-    for d, n, k, f in zip(*(np.asarray(a) for a in res.events)):
+    for e, (d, n, k, f) in enumerate(zip(*(np.asarray(a) for a in res.events))):
         letter = EVENT_LETTERS[int(k)]
-        out.append(dict(depth=float(d), relative_depth=float(d) / D0, node=int(n), kind=letter,
+        squeeze = e < first
+        out.append(dict(phase="squeeze" if squeeze else "push", depth=float(d),
+                        relative_depth=float(d) / D0 if squeeze else None, node=int(n), kind=letter,
                         meaning=EVENT_MEANING[letter], finger=int(f)))
     return out
 
@@ -402,8 +407,10 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     Keys: status, advice, final_depth [m], target_depth [m] (with a scene), grip_distance [m],
     relative_depth, rows, n_events, events (see :func:`event_table`), event_sequence (letters),
     total_force [N] per finger at the final depth ({"finger0": [fx, fy], "finger1": ...};
-    "finger2" is an adversary's pusher), contact_regions per finger at the final depth (see :func:`contact_regions`; per finger also
-    n_stick, n_slip), grip nodes, scene parameters, and ``timings`` [s] if given.
+    "finger2" is an adversary's pusher), contact_regions per finger at the final depth (see
+    :func:`contact_regions`; per finger also n_stick, n_slip), grip nodes, with an adversary
+    squeeze_status and push [m] (the last push displacement), scene parameters, and
+    ``timings`` [s] if given.
     """
     res = trimmed(res)
     from ..simulation.status import Status
@@ -428,6 +435,9 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
             n_slip=sum(g["n_slip"] for g in regions[f])) for f in range(len(regions))},
     )
     out["grip_nodes"] = [int(v) for v in np.asarray(res.grip)]      # where the fingers first touched
+    if np.shape(res.centres)[-2] > 2:                                 # an adversary pushed (or tried to)
+        out["squeeze_status"] = Status(int(res.squeeze_status)).name
+        out["push"] = float(np.asarray(res.push)[-1])
     if scene is not None:
         out["target_depth"] = float(scene.depth)
         out["scene"] = dict(

@@ -129,6 +129,7 @@ class State:
     count: jax.Array        # rows recorded
     stats: Stats
     squeeze_status: jax.Array   # the status the squeeze phase ended with
+    squeeze_events: jax.Array   # events the squeeze phase logged (the push's follow)
     margin: jax.Array           # the grip's smooth feasibility margin [rad] (Model.margin)
     grip: jax.Array             # (2,) boundary positions of the first contacts
     invalid: jax.Array          # () first invalid input (Model.invalid: the grasp's, or a placed grip's depth)
@@ -190,6 +191,7 @@ def init(model: Model) -> State:
         hist=(z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
               z((H, m, 2), dt), z((H, F, 2), dt), z((H, F), dt), z((H, 3), dt), z(H, dt)),
         count=i32(0), stats=Stats(*(i32(0),) * 5, zero, i32(0), i32(0)), squeeze_status=i32(RUNNING),
+        squeeze_events=i32(0),
         margin=model.margin, grip=model.grip, invalid=model.invalid, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt))
 
 
@@ -584,7 +586,7 @@ def simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
         st = init(model)
     with jax.named_scope("squeeze"):
         st = run(model, st)
-    st = _with(st, squeeze_status=st.status)
+    st = _with(st, squeeze_status=st.status, squeeze_events=st.n_ev)
     if cfg.adversary:
         with jax.named_scope("push"):
             pm = push_model(model, grasp, st)

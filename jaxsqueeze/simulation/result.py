@@ -97,6 +97,9 @@ class SqueezeResult:
     push_work: (3,) work during the adversary push [J]: done by the pusher on the object, and
         resisted by finger 0 and by finger 1 (trapezoid rule over the recorded rows; zeros
         without an adversary). See :mod:`jaxsqueeze.plan.quality`.
+    squeeze_events: () events logged by the squeeze phase: the first ``squeeze_events`` of the
+        event log are the squeeze's (at squeeze depths), the rest the push's (at push
+        displacements).
 
     A result computed with ``history=False`` (what grasp maps use) holds two rows: row 0 the
     last squeeze-phase row, row 1 the last row; ``stats`` still counts every step and event.
@@ -126,6 +129,7 @@ class SqueezeResult:
     margin: jax.Array
     squeeze_status: jax.Array
     push_work: jax.Array
+    squeeze_events: jax.Array
 
     @property
     def outcome(self) -> Status:
@@ -205,7 +209,8 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
         g=st.g * gs, count=k, n_events=jnp.minimum(st.n_ev, ev_d.shape[0]), nodes=op.nodes,
         grip=op.nodes[st.grip], radius=grasp.radius,
         stats=st.stats, invalid=st.invalid, push=pad(push) * L, margin=st.margin,
-        squeeze_status=st.squeeze_status, push_work=st.work * Fs * L)
+        squeeze_status=st.squeeze_status, push_work=st.work * Fs * L,
+        squeeze_events=jnp.minimum(st.squeeze_events, ev_d.shape[0]))
 
 
 HISTORY = ("depth", "modes", "finger", "theta", "forces", "boundary_displacement", "centres", "alpha", "rigid",

@@ -93,6 +93,7 @@ def test_demo_writes_everything(demo_dir):
     assert s["final_depth"] == pytest.approx(0.015)
     assert set(s["timings"]) >= {"meshing", "operator", "squeeze", "total"}
     assert s["n_events"] == len(s["events"]) and s["n_events"] > 0
+    assert all(ev["phase"] == "squeeze" and ev["relative_depth"] > 0 for ev in s["events"])       # no adversary
 
 
 def test_run_matches_python(run_dir):
@@ -307,6 +308,8 @@ def test_post_consumers_honour_count_of_a_jit_result(tmp_path):
     assert len(np.asarray(res.depth)) > k                       # padded
     s = views.summary(res, scene)
     assert s["rows"] == k and s["n_events"] == e == len(views.event_table(res))
+    assert int(res.squeeze_events) == e and all(ev["phase"] == "squeeze" and ev["relative_depth"] > 0
+                                                          for ev in s["events"])
     path = export.write_paraview(str(tmp_path), res, scene.mesh)
     with meshio.xdmf.TimeSeriesReader(path) as r:
         r.read_points_cells()

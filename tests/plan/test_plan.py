@@ -334,6 +334,10 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
     assert s["contact_regions"]["finger2"]["n_stick"] + s["contact_regions"]["finger2"]["n_slip"] > 0
     table = views.event_table(res)
     assert [e["finger"] for e in table] == list(np.asarray(res.events.finger)[:len(table)]) and table[0]["finger"] == 2
+    # the push's events are marked as such (their depth is the push displacement, no relative depth)
+    assert int(res.squeeze_events) == 0 and {e["phase"] for e in table} == {"push"}
+    assert all(e["relative_depth"] is None and 0 < e["depth"] <= 0.003 for e in table)
+    assert s["squeeze_status"] == "SUCCESS" and s["push"] == pytest.approx(0.003)
     from matplotlib.patches import Circle
     from jaxsqueeze.post import plots
     ax = plots.plot_deformed(res, sc.mesh, details=False).axes[0]
