@@ -22,6 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..geometry.boundary import positions
 from ..simulation.laws import EVENT_KINDS, EVENT_MEANING, FREE, MODE_NAMES, SLIP_NEG, SLIP_POS, STICK  # noqa: F401
 
 EVENT_LETTERS = EVENT_KINDS   # A new contact, B break, C stick→slip, D slip→stick
@@ -114,14 +115,9 @@ def grip_positions(res) -> np.ndarray:
     modes, finger = np.asarray(res.modes), np.asarray(res.finger)
     theta, C = np.asarray(res.theta, float), np.asarray(res.centres, float)
     alpha, U = np.asarray(res.alpha, float), np.asarray(res.boundary_displacement, float)
-    nodes, grip = np.asarray(res.nodes), np.asarray(res.grip)
     r = float(res.radius)
     out = np.full((2, 2), np.nan)
-    for f in (0, 1):
-        slot = np.flatnonzero(nodes == grip[f])
-        if not slot.size:
-            continue
-        k = slot[0]
+    for f, k in enumerate(positions(res.nodes, res.grip)):
         rows = np.flatnonzero((modes[:, k] > FREE) & (finger[:, k] == f))
         if rows.size:
             i = rows[0]

@@ -261,9 +261,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     if concrete and scene.placement is not None and np.ndim(res.status) == 0 and \
             int(res.status) == Status.INVALID_INPUT:
-        nodes = np.asarray(op.nodes)
-        P = np.asarray(op.points) * float(op.length)
-        a, b = (P[np.flatnonzero(nodes == int(g))[0]] for g in np.asarray(res.grip))
+        a, b = np.asarray(op.points)[boundary.positions(op.nodes, res.grip)] * float(op.length)
         raise ValueError(f"depth = {float(scene.depth):g} m: expected a depth smaller than the distance between the "
                          f"fingers' first contacts, {float(np.linalg.norm(a - b)):.4g} m for this placement; "
                          "squeeze less deep, or place the fingers farther apart.")
