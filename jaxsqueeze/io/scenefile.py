@@ -97,6 +97,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import warnings as warnings_module
 from dataclasses import dataclass
 from typing import Any
 
@@ -446,7 +447,10 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     if have("object") and not _bad(grip_points, grip_nodes):
         if is_band:
             if not _bad(material):
-                mesh = errs.run(_band, tables["object"], band_height, (max_edge, refine_edge))
+                made = errs.run(_band, tables["object"], band_height, (max_edge, refine_edge))
+                if not _bad(made):
+                    mesh, said = made
+                    warnings.extend(said)
         else:
             est = errs.run(_estimate, tables["object"], (max_edge, refine_edge), grip_points)
             if est is not None and not _bad(est):
@@ -656,7 +660,10 @@ def _band(obj, height, overrides=(None, None)):
     try:
         curve = {"heart": lambda: curves.heart(size), "leaf": lambda: curves.leaf(size, size / 2, size / 40),
                  "circle": lambda: curves.circle(size / 2)}[kind]()
-        return Band.from_function(curve, m, width=width, height=height)
+        with warnings_module.catch_warnings(record=True) as caught:   # scene-file warnings are the spec's
+            warnings_module.simplefilter("always")
+            band = Band.from_function(curve, m, width=width, height=height)
+        return band, [f"object.width: {w.message}" for w in caught]
     except ValueError as e:
         raise _wrap(e, "object", {r"width": "object.width", r"height": "object.height",
                                   r"size|radius|length": "object.size", r"nodes|\bm\b": "object.nodes"}) from None

@@ -25,7 +25,10 @@ Strain energy U = 1/2 E int (A eps^2 + I zeta^2) ds with A = w h and I = h w^3 /
     (about 0.4-0.5 mm) standing several mm tall, so we cube ``width`` (default 0.5 mm) and
     keep ``height`` (default 5 mm, the paper's value) linear; this is the paper's formula
     with its w and h exchanged. The literal reading (a 5 mm wall in the plane, 5^3 times
-    stiffer in bending per unit height) is ``width=5e-3`` with ``height`` the other size.
+    stiffer in bending per unit height) is ``width=5e-3`` with ``height`` the other size
+    (it warns on the heart: a 5 mm wall is thicker than the 2.2 mm radius at its cusps).
+    A wall at least half as thick as the band is wide is refused (a length in mm, most
+    likely); one thicker than the tightest radius of curvature warns.
 
 Discretization (isoparametric, Cartesian): the geometry is a periodic cubic spline through
 the m nodes (scipy ``CubicSpline``, ``bc_type='periodic'``), parametrized by arc length
@@ -58,6 +61,7 @@ L = the larger bounding-box side of the nodes. A thin band is compliant, so G is
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -120,6 +124,21 @@ def _check_size(m: int) -> None:
         raise ValueError(f"a band of {m:,} nodes needs dense matrices of (4m)² = {(4 * m) ** 2 * 8 / 1024 ** 3:.3g} GiB "
                          f"each, beyond the limit of {MAX_NODES:,} nodes (jaxsqueeze.mechanics.band.MAX_NODES, env "
                          "JAXSQUEEZE_MAX_BAND_NODES); 128-256 nodes resolve the examples' outlines")
+
+
+def _check_wall(width: float, xy: np.ndarray, kappa: np.ndarray) -> None:
+    """Refuse a wall that fills the ring; warn where it is thicker than the curve's radius of
+    curvature (the thin curved-beam model does not hold there)."""
+    short = float(np.min(np.ptp(xy, axis=0)))
+    if width >= 0.5 * short:
+        raise ValueError(f"band width = {width:g} m is the wall thickness in the plane, but the band is only "
+                         f"{short:g} m across: the wall would fill the ring. Give it in metres (a cookie cutter's "
+                         "wall is about 0.5e-3 m)")
+    k = int(np.argmax(np.abs(kappa)))
+    if width * abs(kappa[k]) > 1.0:
+        warnings.warn(f"band width = {width:g} m is thicker than the band's tightest radius of curvature "
+                      f"({1 / abs(kappa[k]):.3g} m, at node {k}): the thin-wall beam model does not hold "
+                      "there", stacklevel=4)
 
 
 def _length(name: str, v) -> float:
@@ -239,6 +258,7 @@ class Band(ByContent):
         J = np.linalg.norm(d1, axis=1)
         t = d1 / J[:, None]
         kappa = (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / J**3
+        _check_wall(width, xy, kappa)
         uq = np.minimum(u[:, None] + _XI[None, :] * du[:, None], period)
         xg, wg = np.polynomial.legendre.leggauss(8)
         ue = u[:, None] + 0.5 * (xg + 1.0) * du[:, None]

@@ -175,6 +175,9 @@ def contact_regions(res, row: int = -1, loops=None) -> list[list[dict]]:
         ``positions`` (boundary positions), ``nodes`` (mesh node ids), ``modes`` (names:
         "stick", "slip+", "slip-"), ``theta`` (polar angles [rad]), ``theta_range``
         ((min, max) [rad]), ``arc_length`` (r·(max − min) [m]), ``n_stick``, ``n_slip``.
+        At depth 0 (row 0, and the only row of a squeeze that never started: INFEASIBLE_GRIP,
+        INVALID_INPUT) the nodes where the fingers first touch are listed as "stick", with
+        zero force.
     """
     res = trimmed(res)
     r = row_index(res, row)

@@ -172,13 +172,26 @@ def test_curves():
     ((16,), dict(width=float("inf")), "band width = inf: expected a finite length > 0 m"),
     ((16,), dict(height="5"), "band height = '5': expected a length in metres"),
     ((16,), dict(height=-1.0), "band height = -1.0"),
+    ((16,), dict(width=0.5), r"band width = 0.5 m is the wall thickness .* only 0.08 m across: the wall would fill"),
 ])
 def test_bands_too_coarse_too_large_or_of_bad_size_are_refused(args, kw, match):
     """A band of 4 nodes was accepted and about 800 times too stiff (a circle: the spline through
     4 points does not resolve it; 8 nodes are 35 % off, 64 within 0.5 %); a million nodes hung
     in the O(m²) self-crossing check before the squeeze's memory guard; an infinite width or a
-    string height went through or failed deep inside."""
+    string height went through or failed deep inside; a 0.5 m wall on an 8 cm ring (a width in
+    mm) ran without a word."""
     with pytest.raises(ValueError, match=match):
         Band.from_function(curves.circle(0.04), *args, **kw)
     with pytest.raises(ValueError, match="m >= 8, got shape"):
         Band.from_curve(curves.sample(curves.circle(0.04), 5))
+
+
+def test_a_wall_thicker_than_the_tightest_curvature_radius_warns():
+    """The thin-wall beam model needs the wall thin against the radius of curvature: the paper's
+    literal 5 mm wall on the 8 cm heart is thicker than the 2.2 mm radius at its cusps."""
+    import warnings
+    with pytest.warns(UserWarning, match=r"band width = 0.005 m is thicker than .* radius of curvature \(0.00218 m"):
+        Band.from_function(curves.heart(0.08), 128, width=5e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Band.from_function(curves.heart(0.08), 128)          # the default 0.5 mm wall: w / r = 0.23

@@ -225,6 +225,7 @@ def test_band_scene_file_keys():
     ("object.band", lambda s: s.replace('"circle"', '"star"')),
     ("object.nodes", lambda s: s.replace("nodes = 32\n", "")),
     ("object.width", lambda s: s.replace("nodes = 32", "nodes = 32\nwidth = -1.0")),
+    ("object.width", lambda s: s.replace("nodes = 32", "nodes = 32\nwidth = 0.5")),    # mm meant: 0.5 m wall
     ("object.max_edge", lambda s: s.replace("nodes = 32", "nodes = 32\nmax_edge = 0.01")),
     ("material.thickness", lambda s: s.replace("nodes = 32", "nodes = 32\nheight = 0.005").replace(
         "E = 2.0e9", "E = 2.0e9\nthickness = 0.004")),
@@ -236,6 +237,14 @@ def test_bad_band_scene(key, edit):
     with pytest.raises(scenefile.SceneFileError) as e:
         scenefile.load_text(edit(BAND_SCENE))
     assert e.value.key == key, str(e.value)
+
+
+def test_band_scene_file_warns_of_a_wall_thicker_than_its_curvature_radius():
+    heart = BAND_SCENE.replace('"circle"', '"heart"').replace("nodes = 32", "nodes = 64\nwidth = 0.005").replace(
+        "0.0]", "0.0176]")
+    said = scenefile.load_text(heart).warnings
+    assert any(w.startswith("object.width: band width = 0.005 m is thicker than") for w in said), said
+    assert not scenefile.load_text(BAND_SCENE).warnings
 
 
 def test_band_scene_rejects_mesh_size_options(tmp_path, capsys):
