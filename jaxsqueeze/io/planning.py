@@ -87,7 +87,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
         s3 = settings.push_at if settings.push_at is not None else float(np.asarray(scene.placement.s)[0]) + P / 4
         scene = scene.replace(adversary=Adversary(s=s3, push=settings.push, angle=settings.push_angle))
     name = settings.quality or ("adversary_work" if settings.push > 0 else "squeeze_work")
-    qfn = quality_of(scene, name)
+    quality_of(scene, name)                     # a bad name, or adversary_work without a push, before any work
     try:
         opt = getattr(optax, settings.optimizer)(settings.learning_rate)
         if not (hasattr(opt, "init") and hasattr(opt, "update")):
@@ -99,8 +99,8 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
     if settings.push >= float(op.length):
         raise ValueError(f"plan.push: expected a push [m] shorter than the object ({float(op.length):.4g} m), "
                          f"got {settings.push}")
-    gmap = grasp_map(scene, qfn, spacing=settings.spacing or P / 24, op=op, progress=progress)
-    found = optimize_placement(scene, qfn, optimizer=opt, steps=settings.steps, starts=settings.starts,
+    gmap = grasp_map(scene, name, spacing=settings.spacing or P / 24, op=op, progress=progress)
+    found = optimize_placement(scene, name, optimizer=opt, steps=settings.steps, starts=settings.starts,
                                init=gmap.best[:settings.starts] if len(gmap.best) else None, op=op,
                                progress=progress)
     best = scene.replace(placement=found.best)

@@ -2,7 +2,7 @@
 (DESIGN 2.9). Builds on :mod:`jaxsqueeze.simulation`; never imported by it."""
 from ..simulation.scene import Adversary, Placement
 from . import quality
-from .search import GraspMap, Search, candidate_pairs, evaluate, grasp_map, optimize_placement
+from .search import GraspMap, Search, candidate_pairs, evaluate, grasp_map, optimize_placement, roles_symmetric
 
 __all__ = ["Adversary", "GraspMap", "Placement", "Search", "candidate_pairs", "evaluate", "grasp_map",
-           "optimize_placement", "quality"]
+           "optimize_placement", "quality", "roles_symmetric"]

@@ -24,6 +24,7 @@ from .. import compiler
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
 from ..simulation.status import Status
+from ..tracing import numeric
 from .quality import adversary_work, grip_force, slip_margin, squeeze_work
 
 
@@ -291,20 +292,37 @@ def grid(scene: Scene, spacing=None) -> np.ndarray:
     return np.arange(n) * (P / n)
 
 
+def roles_symmetric(scene: Scene, quality="squeeze_work") -> bool:
+    """Whether swapping the two fingers' roles (which one squeezes) leaves ``quality``
+    unchanged: true for a quality named in ``QUALITIES`` on fingers that rotate alike or not
+    at all (the squeeze is then the same up to a rigid translation). A function of a result
+    may tell the fingers apart (``finger_work(res)[0]``), and so do unequal rotation rows."""
+    rot = scene.fingers.rotation
+    alike = rot is None or (numeric(rot) and np.array_equal(np.asarray(rot)[0], np.asarray(rot)[1]))
+    return isinstance(quality, str) and alike
+
+
+def _pairs(n: int, ordered: bool):
+    """(i, j) index arrays of every pair of n positions: i < j, or both orders."""
+    return np.nonzero(~np.eye(n, dtype=bool)) if ordered else np.triu_indices(n, 1)
+
+
 def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float = 0.0, op=None,
               batch: str = "auto", chunk: int = 64, progress: bool = True, keep: int = 8,
               processes: int | None = None) -> GraspMap:
     """Evaluate ``quality`` over every pair of boundary positions at ``spacing`` [m]
     (``batch``, ``chunk`` and ``processes`` as in :func:`evaluate`).
 
-    Finger roles swapped give the same grasp (the squeeze is linear and total), so each
-    unordered pair is squeezed once and the map is mirrored. Returns a :class:`GraspMap`.
+    When swapping the finger roles changes nothing (:func:`roles_symmetric`: a named quality,
+    fingers that rotate alike) each unordered pair is squeezed once and the map is mirrored;
+    otherwise both orders are squeezed. Returns a :class:`GraspMap`.
     """
     _check_count("keep", keep, 1)
     angle = _check_angle(angle)
     s = grid(scene, spacing)
     n = len(s)
-    i, j = np.triu_indices(n, 1)
+    mirror = roles_symmetric(scene, quality)
+    i, j = _pairs(n, not mirror)
     X = np.stack([s[i], s[j], np.full(len(i), angle)], 1)
     summ = evaluate(scene, X, quality, op=op, batch=batch, chunk=chunk, progress=progress, processes=processes)
     full = {}
@@ -312,7 +330,8 @@ def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float =
         a = np.full((n, n), Status.INFEASIBLE_GRIP if name == "status" else (0.0 if name != "margin" else -np.pi))
         v = getattr(summ, name)
         a[i, j] = v
-        a[j, i] = v
+        if mirror:
+            a[j, i] = v
         full[name] = a
     ok = summ.status == Status.SUCCESS
     order = np.argsort(-np.where(ok, summ.quality, -np.inf))[:keep]
@@ -321,13 +340,15 @@ def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float =
                     float(angle), best, len(X))
 
 
-def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None) -> np.ndarray:
+def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None, ordered: bool = False) -> np.ndarray:
     """(k, 3) candidates (s_0, s_1, angle) whose first contacts lie inside both friction cones,
-    found without squeezing (the approach and the cone test only), best margin first."""
+    found without squeezing (the approach and the cone test only), best margin first; each
+    pair once (s_0 < s_1), or in both orders with ``ordered`` (for fingers or a quality that
+    tell the roles apart, :func:`roles_symmetric`)."""
     from ..simulation import api, engine
 
     s = grid(scene, spacing)
-    i, j = np.triu_indices(len(s), 1)
+    i, j = _pairs(len(s), ordered)
     X = np.stack([s[i], s[j], np.full(len(i), _check_angle(angle))], 1)
     op = _check(scene, X, op)
     sc = _placed(scene, X[0])
@@ -420,8 +441,10 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         # the coarse map, screened: only pairs whose first contacts pass the cone test (the
         # approach and Section I-A's test, no squeeze) are squeezed
         spacing = P / 16 if coarse_spacing is None else coarse_spacing
-        screened = len(grid(scene, spacing)) * (len(grid(scene, spacing)) - 1) // 2
-        X = candidate_pairs(scene, spacing, op=op)
+        ordered = not roles_symmetric(scene, quality)
+        n = len(grid(scene, spacing))
+        screened = n * (n - 1) // (1 if ordered else 2)
+        X = candidate_pairs(scene, spacing, op=op, ordered=ordered)
         summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
         squeezes += len(X)
         ok = np.zeros(0, bool) if summ is None else summ.status == Status.SUCCESS

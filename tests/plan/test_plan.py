@@ -369,6 +369,27 @@ def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):
         jsq.squeeze(square.replace(adversary=plan.Adversary(s=s3, push=0.2)))
 
 
+def test_a_map_squeezes_both_finger_orders_when_the_fingers_differ(ellipse):
+    """Fingers that rotate differently make the roles matter: the map mirrored each pair anyway
+    and showed one order's quality for both (13 % off on a disk), and the better order could
+    never be its best. A quality given as a function may read one finger, so it is not
+    mirrored either."""
+    turning = ellipse.replace(fingers=jsq.Fingers(radius=0.01, rotation=[[0.0, 0.0], [60.0, 0.0]]))
+    alike = ellipse.replace(fingers=jsq.Fingers(radius=0.01, rotation=[[60.0, 0.0], [60.0, 0.0]]))
+    assert plan.roles_symmetric(ellipse) and plan.roles_symmetric(alike)
+    assert not plan.roles_symmetric(turning) and not plan.roles_symmetric(ellipse, Q.squeeze_work)
+    P = float(ellipse.curve().perimeter)
+    gm = jsq.grasp_map(turning, spacing=P / 6, progress=False)
+    n = len(gm.s)
+    assert gm.evaluations == n * (n - 1)
+    i, j = np.nonzero((gm.status == jsq.Status.SUCCESS) & (gm.status.T == jsq.Status.SUCCESS))
+    assert len(i) >= 2
+    direct = plan.evaluate(turning, np.stack([gm.s[i], gm.s[j], np.zeros(len(i))], 1), progress=False)
+    np.testing.assert_allclose(gm.quality[i, j], direct.quality, rtol=1e-12)
+    assert np.max(np.abs(gm.quality[i, j] - gm.quality[j, i]) / np.abs(gm.quality[i, j])) > 0.01
+    assert len(plan.candidate_pairs(turning, P / 6, ordered=True)) == 2 * len(plan.candidate_pairs(turning, P / 6))
+
+
 def test_map_chunks_across_processes_equal_the_loop(ellipse, tmp_path):
     """evaluate(batch="processes"): chunks of candidates looped in two worker processes give
     the loop's statuses and qualities, in input order (an infeasible pair included)."""
