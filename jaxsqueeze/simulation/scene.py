@@ -355,9 +355,10 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
     A band (:class:`~jaxsqueeze.band.Band`) is built once per band object: its scaled
     compliance ``E h T K^+ T^T`` does not depend on E (nor on nu, which a band does not
     have), so ``method`` and ``material.nu`` are ignored and the stiffness scale is
-    ``material.E * band.height``. The band's out-of-plane extent is ``band.height``;
+    ``material.E * material.thickness``. The band's out-of-plane extent is ``band.height``;
     ``material.thickness`` must equal it (raises ``ValueError`` otherwise, rather than
-    silently using one of two different values).
+    silently using one of two different values). A traced thickness (``jax.vmap`` or
+    ``jax.jacfwd`` over it) cannot be checked; it scales the band as a band of that height.
     """
     from ..mechanics.fem import compliance
 
@@ -395,10 +396,11 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
 
 
 def stiffness_of(obj, material: Material, dtype=None) -> jax.Array:
-    """E h [N/m] of a mesh (h = ``material.thickness``) or band (h = its height): the force
-    scale of a compliance operator, whose scaled G depends on the object and ν only."""
-    h = material.thickness if isinstance(obj, Mesh) else obj.height
-    return as_array(material.E * h, dtype)
+    """E h [N/m], h = ``material.thickness``: the force scale of a compliance operator, whose
+    scaled G depends on the object and ν only. A band's stiffness is linear in its height
+    (A = w h, I = h w³ / 12), so its thickness, which equals its height when checked eagerly,
+    scales it exactly when traced too (derivatives in it included)."""
+    return as_array(material.E * material.thickness, dtype)
 
 
 def boundary_curve(obj) -> "boundary.Curve":

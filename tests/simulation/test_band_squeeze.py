@@ -325,17 +325,20 @@ def test_point_contact_fails_when_its_turning_cone_reaches_the_force(runs):
 def test_jacfwd_through_a_band_squeeze_matches_central_differences(runs):
     """jax.jacfwd through a band squeeze (point contacts; the band's compliance has no ν) of the
     final grip force w.r.t. E, μ, radius and depth, against central differences (relative step
-    1e-6). It used to fail inside JAX's custom_vmap JVP rule, which cannot take the empty ν."""
+    1e-6), and w.r.t. the thickness (the band's height: the force is linear in it). It used to
+    fail inside JAX's custom_vmap JVP rule, which cannot take the empty ν; a traced thickness
+    was ignored (derivative 0, the same force at every height in a vmap)."""
     scene = runs["heart"][0]
-    p0 = np.array([2e9, 0.26, 0.005, 0.006])
+    p0 = np.array([2e9, 0.26, 0.005, 0.006, scene.mesh.height])
 
     def force(p):
-        sc = scene.replace(material=dataclasses.replace(scene.material, E=p[0]), friction=p[1], fingers=jsq.Fingers(radius=p[2]),
-                           depth=p[3])
+        sc = scene.replace(material=dataclasses.replace(scene.material, E=p[0], thickness=p[4]), friction=p[1],
+                           fingers=jsq.Fingers(radius=p[2]), depth=p[3])
         return jsq.squeeze(sc).grip_force
 
     J = np.asarray(jax.jacfwd(force)(jnp.asarray(p0)))
     np.testing.assert_allclose(J[0], float(force(p0)) / p0[0], rtol=1e-9)       # linear in E
+    np.testing.assert_allclose(J[4], float(force(p0)) / p0[4], rtol=1e-9)       # and in the height
     for k, name in enumerate(("E", "friction", "radius", "depth")):
         up, down = p0.copy(), p0.copy()
         up[k] += 1e-6 * p0[k]
