@@ -456,12 +456,11 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
             if est is not None and not _bad(est):
                 size, n_tri, m_est = est
                 if not _bad(fingers, depth_given, material):
-                    uerr, uwarn = validate.unit_problems(
+                    uerr, _ = validate.unit_problems(          # warnings: below, on the mesh made
                         size=size, radius=float(fingers.radius), E=float(material.E),
                         depth=depth_given if depth_given else None)
                     for msg in uerr:
                         errs.add(SceneFileError(dkey, msg))
-                    warnings.extend(uwarn)
                 if settings_ok and not _bad(method):
                     s0 = Settings(**settings)
                     for msg in validate.check_costs(int(m_est), int(n_tri / 2 + m_est), method, s0.slots(int(m_est)),
@@ -493,13 +492,12 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
             errs.add(SceneFileError("grip.nodes", f"node(s) {bad} do not exist: the mesh has nodes 0..{mesh.n - 1}"))
         grip, gkey = tuple(grip_nodes), "grip.nodes"
     errs.raise_if_any()
-    if rho is not None and depth_given is None:
-        depth = rho * _grip_distance(mesh, grip)
-        deep = validate.deep_warning(float(np.max(np.ptp(mesh.points, axis=0))), depth)
-        if deep:
-            warnings.append(deep)
-    else:
-        depth = depth_given
+    depth = rho * _grip_distance(mesh, grip) if rho is not None and depth_given is None else depth_given
+    # mixed units and a deep squeeze, on the object as made (a mesh file or band included), in
+    # the words and numbers an eager squeeze would warn with
+    warnings.extend(validate.unit_problems(
+        size=float(np.max(np.ptp(mesh.points, axis=0))), radius=float(fingers.radius), depth=float(depth),
+        E=float(material.E), thickness=float(material.thickness))[1])
     scene = None
     try:
         scene = Scene(mesh=mesh, material=material, fingers=fingers, grip=grip, friction=friction, depth=depth,

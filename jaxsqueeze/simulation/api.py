@@ -278,8 +278,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
 
 def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
     """(operator, grasp) of a squeeze of ``scene``; with ``concrete`` (an eager call) after
-    every eager check, each raising ``ValueError`` that names the field (and warning of a
-    squeeze deeper than half the object)."""
+    every eager check, each raising ``ValueError`` that names the field (and warning of mixed
+    units or a squeeze deeper than half the object: :func:`validate.unit_problems`)."""
     if concrete:
         bad = validate.shape_problems(scene) or validate.scene_cost_problems(scene)
         if bad:
@@ -293,9 +293,11 @@ def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
         op = dataclasses.replace(op, stiffness=stiffness_of(scene.mesh, scene.material, op.G.dtype))
     if concrete:
         check_force_scale(op)
-        deep = validate.deep_warning(float(op.length), float(scene.depth))
-        if deep:
-            warnings.warn(deep, stacklevel=3)
+        _, said = validate.unit_problems(size=float(op.length), radius=float(scene.fingers.radius),
+                                         depth=float(scene.depth), E=float(scene.material.E),
+                                         thickness=float(scene.material.thickness))
+        for line in said:                  # mixed units, a squeeze deeper than half the object
+            warnings.warn(line, stacklevel=3)
         if scene.placement is None:
             check_grip(scene, op)
     grasp = grasp_of(scene, op, validated=concrete)

@@ -593,24 +593,30 @@ def deep_warning(size: float, depth: float) -> str | None:
             "squeezes stop near 15 %")
 
 
-def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None) -> tuple[list[str], list[str]]:
+def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
+                  thickness=None) -> tuple[list[str], list[str]]:
     """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.
 
-    ``size`` is the object's extent [m]. Errors where the result would be meaningless (a
-    depth as large as the object); warnings where the numbers differ by orders of magnitude
-    from each other (a length in millimetres among metres, E in MPa).
+    ``size`` is the object's extent [m] (the larger bounding-box side). Errors where the
+    result would be meaningless (a depth as large as the object); warnings where the numbers
+    differ by orders of magnitude from each other (a length in millimetres among metres, E in
+    MPa): a fingertip more than 10 times the object or under a thousandth of it, a plate
+    more than 10 times thicker than it is wide.
     """
     errors, warns = [], []
     hint = "every length is in metres (a length in millimetres is 1000 times too large)"
-    vals = [x for x in (size, radius, depth, E, max_edge) if x is not None]
+    vals = [x for x in (size, radius, depth, E, max_edge, thickness) if x is not None]
     if not all(math.isfinite(float(x)) and float(x) > 0 for x in vals):
         return errors, warns                       # the field checks report those
     if size is not None and depth is not None and depth >= size:
         errors.append(f"depth = {depth:g} m is not smaller than the object ({size:g} m across): the squeeze "
                       f"would crush it; {hint}")
-    if size is not None and radius is not None and not 1e-3 <= radius / size <= 1e3:
+    if size is not None and radius is not None and not 1e-3 <= radius / size <= 10:
         warns.append(f"the fingertip radius ({radius:g} m) and the object ({size:g} m across) differ by a factor "
                      f"{max(radius / size, size / radius):.3g}; {hint}")
+    if size is not None and thickness is not None and thickness > 10 * size:
+        warns.append(f"thickness = {thickness:g} m is {thickness / size:.3g} times the object's size ({size:g} m "
+                     f"across), where plane stress describes a thin plate; {hint}")
     if size is not None and size > 10:
         warns.append(f"the object is {size:g} m across; {hint}")
     deep = deep_warning(size, depth) if size is not None and depth is not None else None

@@ -181,6 +181,22 @@ def test_example_scene_reads_mesh_file():
     np.testing.assert_allclose(p, [[0.0, -0.04], [0.006946, 0.039392]], atol=1e-3)  # nearest nodes
 
 
+def test_a_mesh_file_in_millimetres_warns(tmp_path):
+    """Unit checks ran only on built-in shapes (sized before meshing): a mesh file written in
+    mm (a 100-unit square) squeezed with SUCCESS and no word. They now run on the object as
+    read, as they do on a band, with the words an eager squeeze would warn with."""
+    mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02)
+    pts = 1000 * (mesh.points + mesh.offset)
+    meshio.write(tmp_path / "mm.vtu", meshio.Mesh(np.c_[pts, np.zeros(len(pts))], [("triangle", mesh.triangles)]))
+    text = ('[object]\nmesh_file = "mm.vtu"\n[material]\nE = 1e5\nnu = 0.3\nthickness = 25.4\n'
+            "[fingers]\nradius = 0.01\n[grip]\npoints = [[0.0, -50.0], [0.0, 50.0]]\n[squeeze]\ndepth = 0.005\n")
+    said = scenefile.load_text(text, base=str(tmp_path)).warnings
+    assert any("the object is 100 m across; every length is in metres" in w for w in said), said
+    assert any(w.startswith("the fingertip radius (0.01 m) and the object (100 m across) differ by a factor 1e+04")
+               for w in said), said
+    assert not scenefile.load(os.path.join(ROOT, "examples", "foam_disk.toml")).warnings
+
+
 def test_grip_nodes_of_a_mesh_file_with_unused_nodes_are_refused(tmp_path):
     """A mesh file whose node 0 is used by no triangle (gmsh writes a circle's centre): the
     reader drops it and renumbers the rest (``mesh.source`` maps back), so grip.nodes in the

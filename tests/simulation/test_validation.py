@@ -246,6 +246,10 @@ def test_mixed_units():
     assert V.unit_problems(size=0.1, radius=0.01, depth=0.01, E=1e5) == ([], [])
     err, warn = V.unit_problems(size=0.1, radius=0.01, depth=0.0999, E=1e5)      # 99.9 %: triangles invert
     assert not err and any("more than 50% of the object" in w for w in warn)
+    # a 10 mm fingertip and a 25.4 mm plate written in mm on a 0.1 m object: were silent
+    assert V.unit_problems(size=0.1, radius=10.0)[1][0].startswith("the fingertip radius (10 m) and the object")
+    assert "plane stress describes a thin plate" in V.unit_problems(size=0.1, thickness=25.4)[1][0]
+    assert V.unit_problems(size=0.1, radius=0.5, thickness=0.1) == ([], [])
 
 
 # ----------------------------------------------------------------------------- the front door, as a hostile user
@@ -279,10 +283,13 @@ def test_wrong_types_and_sizes_are_named(square, change, error, message):
 
 def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
     """depth 95 % of the object returned SUCCESS with inverted triangles and no word; now the
-    eager squeeze warns, and so does the CLI for a relative_depth (it only checked a depth)."""
+    eager squeeze warns, and so does the CLI for a relative_depth (it only checked a depth).
+    A thickness in mm (25.4 for 0.0254 m) warns too: it gave 1000 times the force silently."""
     from jaxsqueeze.io import scenefile
     with pytest.warns(UserWarning, match="more than 50% of the object"):
         jsq.squeeze(_scene(square, depth=0.06))
+    with pytest.warns(UserWarning, match=r"thickness = 25.4 m is 254 times the object's size"):
+        jsq.squeeze(_scene(square, material=jsq.Material(E=1e5, nu=0.3, thickness=25.4)))   # mm for m
     text = (b"[object]\nshape = \"rectangle\"\nwidth = 0.1\nheight = 0.1\nmax_edge = 0.02\n[material]\nE = 1e5\n"
             b"nu = 0.3\nthickness = 0.01\n[fingers]\nradius = 0.01\n[grip]\npoints = [[0.0, -0.05], [0.0, 0.05]]\n"
             b"[squeeze]\nrelative_depth = 0.9\n")
