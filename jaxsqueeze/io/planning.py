@@ -74,7 +74,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
 
     import jaxsqueeze as jsq
     from ..plan import quality as Q
-    from ..plan.search import grasp_map, optimize_placement, quality_of
+    from ..plan.search import _check_search, grasp_map, optimize_placement, quality_of
     from ..post import plots as figures
     from ..post.maps import plot_grasp_map
     from ..post.views import json_ready
@@ -95,6 +95,10 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
     except Exception:          # not in optax, or not an optimizer factory (optax.apply_updates, ...)
         raise ValueError(f"plan.optimizer={settings.optimizer!r} is not an optax optimizer taking a learning "
                          "rate; use e.g. \"adam\", \"sgd\" or \"adabelief\"") from None
+    try:
+        _check_search(opt, settings.steps, settings.starts, None, None)     # before the map, not after it
+    except ValueError as e:
+        raise ValueError(f"plan.optimizer={settings.optimizer!r}: {e}") from None
     op = scene.operator()
     if settings.push >= float(op.length):
         raise ValueError(f"plan.push: expected a push [m] shorter than the object ({float(op.length):.4g} m), "

@@ -400,6 +400,14 @@ def _check_search(optimizer, steps, starts, budget, init) -> None:
     if optimizer is not None and not (hasattr(optimizer, "init") and hasattr(optimizer, "update")):
         raise TypeError(f"optimizer={optimizer!r} is not an optax optimizer; pass one such as optax.adam(0.02) "
                         "(or None for that default).")
+    if optimizer is not None:
+        u = jnp.zeros(3)
+        try:                                   # one step as the search takes it: (gradient, state, params)
+            optimizer.update(u, optimizer.init(u), u)
+        except TypeError as e:
+            raise ValueError(f"the optimizer cannot take a step from a gradient alone ({e}); optimizers with a "
+                             "line search (optax.lbfgs, ...) evaluate the quality themselves, which this search "
+                             "does not support: use optax.adam, optax.sgd, optax.adabelief, ...") from None
     if init is not None:
         candidates(init, "init")
 

@@ -74,6 +74,11 @@ def test_plan_optimizer_that_is_not_an_optimizer_factory_is_an_input_error(tmp_p
     code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
     err = capsys.readouterr().err
     assert code == 2 and "plan.optimizer='apply_updates' is not an optax optimizer" in err, err
+    path.write_text(SCENE.replace("learning_rate = 0.02", 'learning_rate = 0.02\noptimizer = "lbfgs"'))
+    code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])    # exit 3 from inside optax
+    err = capsys.readouterr().err
+    assert code == 2 and "plan.optimizer='lbfgs': the optimizer cannot take a step" in err, err
+    assert not (tmp_path / "o").exists()
 
 
 def test_plan_push_longer_than_the_object_is_an_input_error(tmp_path, capsys):
