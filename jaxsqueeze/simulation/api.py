@@ -79,7 +79,7 @@ def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:
         radius = xp.asarray(a.radius if a.radius is not None else scene.fingers.radius, dt)
         push = xp.asarray(a.push, dt)
         adversary = (xp.asarray(a.s, dt), xp.asarray(a.angle, dt), radius, push,
-                     xp.asarray(a.step, dt) if a.step is not None else push / 50)
+                     xp.asarray(a.step, dt) if a.step is not None else xp.minimum(push / 50, radius))
     rot = scene.fingers.rotation
     rot = xp.zeros((2, 1), dt) if rot is None else xp.asarray(rot, dt)
     g = Grasp(grip=grip, radius=xp.asarray(scene.fingers.radius, dt), mu=xp.asarray(scene.friction, dt),

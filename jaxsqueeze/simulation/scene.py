@@ -94,7 +94,8 @@ class Adversary:
         periodic in 2π (angle and angle + 2π push alike); pushing needs it within a right
         angle of the inward normal (cos angle > 0).
     radius: () fingertip radius [m]; None: the grasping fingers' radius.
-    step: () push step [m], at most the push and the pusher's radius; None: push / 50.
+    step: () push step [m], at most the push and the pusher's radius; None: push / 50, or
+        the pusher's radius where that is smaller.
 
     The grasping fingers hold still at the squeeze depth; the pusher starts on the boundary
     point (tangent to the deformed object there), closes in along its push direction until it

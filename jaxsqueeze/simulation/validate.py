@@ -284,8 +284,8 @@ RULES: tuple[Rule, ...] = (
          "replace NaN/inf positions (s wraps around the boundary: any finite value is a position)"),
     Rule("adversary", _r_adversary, "a finite Adversary.s [m] and angle [rad], a push [m] > 0 shorter than the "
          "object, a radius [m] > 0 and a step [m] > 0 at most the push and the pusher's radius",
-         "use a push below the object's size and the default step (None: push / 50), or a step below the "
-         "pusher's radius"),
+         "use a push below the object's size and the default step (None: push / 50, at most the radius), or a "
+         "step below the pusher's radius"),
 )
 assert tuple(r.field for r in RULES) == FIELDS
 

@@ -368,6 +368,11 @@ def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):
         assert not pushes or float(Q.adversary_work(res)) > 0
         work[angle] = float(Q.adversary_work(res))
     assert work[0.6 + 2 * np.pi] == pytest.approx(work[0.6], rel=1e-9)
+    # a pusher narrower than push / 50 steps by its radius (the default step was refused as too long for it)
+    fine = jsq.squeeze(square.replace(adversary=plan.Adversary(s=s3, push=0.003, angle=0.6, radius=6e-5)))
+    push = np.asarray(fine.push)
+    assert fine.outcome == jsq.Status.SUCCESS and push[-1] == pytest.approx(0.003)
+    assert np.max(np.diff(push)) <= 6e-5 * (1 + 1e-9) and np.sum(np.diff(push) > 0) >= 50
     with pytest.raises(ValueError, match="push 0.2, radius 0.01, step 0.004, object size 0.1"):
         jsq.squeeze(square.replace(adversary=plan.Adversary(s=s3, push=0.2)))
 
