@@ -82,10 +82,17 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
 
     P = float(scene.curve().perimeter)
     if scene.placement is None:
-        scene = scene.replace(placement=Placement(s=scene.arc_length(scene.grip)), grip=None)
+        try:
+            scene = scene.replace(placement=Placement(s=scene.arc_length(scene.grip)), grip=None)
+        except ValueError as e:
+            raise ValueError(f"grip: planning places both fingers along the outer boundary and starts from the "
+                             f"scene's grip, but grip {e} Give grip points on the outer boundary.") from None
     if settings.push > 0:
         s3 = settings.push_at if settings.push_at is not None else float(np.asarray(scene.placement.s)[0]) + P / 4
-        scene = scene.replace(adversary=Adversary(s=s3, push=settings.push, angle=settings.push_angle))
+        try:
+            scene = scene.replace(adversary=Adversary(s=s3, push=settings.push, angle=settings.push_angle))
+        except ValueError as e:
+            raise ValueError(f"plan.push: {e}") from None
     name = settings.quality or ("adversary_work" if settings.push > 0 else "squeeze_work")
     quality_of(scene, name)                     # a bad name, or adversary_work without a push, before any work
     try:

@@ -322,7 +322,9 @@ class Scene:
         pos = boundary.positions(self.boundary_nodes(), node)
         outer = self.mesh.loops[0] if hasattr(self.mesh, "loops") else self.mesh.m
         if np.any(pos >= outer):
-            raise ValueError(f"node(s) {np.asarray(node).tolist()} are not on the outer boundary loop.")
+            off = np.atleast_1d(np.asarray(node))[np.atleast_1d(pos) >= outer].tolist()
+            raise ValueError(f"node(s) {off} lie on a hole's boundary, not on the outer boundary loop that arc "
+                             "lengths (and placements) run along.")
         return boundary.arc_length(self.curve(), pos)
 
     def nearest_boundary_node(self, xy) -> int:

@@ -90,3 +90,23 @@ def test_plan_push_longer_than_the_object_is_an_input_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "error: plan.push: expected a push [m] shorter than the object" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_plan_errors_of_a_hole_grip_and_a_band_push_name_their_key(tmp_path, capsys):
+    """A wall pinch on an annulus (one grip point on the hole) said "node(s) [40, 77] are not on
+    the outer boundary loop" (40 is on it) with no key; a push on a band (point contacts) said
+    the Adversary's error with no key. Both now name the key and only the offending node."""
+    annulus = SCENE.replace('shape = "ellipse"\na = 0.06\nb = 0.04', 'shape = "annulus"\nr_outer = 0.05\nr_inner = 0.03')
+    (tmp_path / "ring.toml").write_text(annulus.replace("[[0.06, 0.0], [-0.06, 0.0]]", "[[0.0, -0.05], [0.0, -0.03]]"))
+    assert cli.main(["plan", str(tmp_path / "ring.toml"), "--out", str(tmp_path / "o"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: grip: planning places both fingers along the outer boundary"), err
+    assert "grip node(s) [" in err and "] lie on a hole's boundary" in err and "," not in err.split("node(s) [")[1][:8]
+    band = ('[object]\nband = "circle"\nsize = 0.08\nnodes = 32\n[material]\nE = 2.0e9\n[fingers]\nradius = 0.005\n'
+            "[grip]\npoints = [[-0.04, 0.0], [0.04, 0.0]]\n[squeeze]\nrelative_depth = 0.1\nfriction = 0.26\n"
+            "[plan]\npush = 0.002\n")
+    (tmp_path / "band.toml").write_text(band)
+    assert cli.main(["plan", str(tmp_path / "band.toml"), "--out", str(tmp_path / "o"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: plan.push: an Adversary needs contact='segment'"), err
+    assert not (tmp_path / "o").exists()
