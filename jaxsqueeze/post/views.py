@@ -408,7 +408,8 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     total_force [N] per finger at the final depth ({"finger0": [fx, fy], "finger1": ...};
     "finger2" is an adversary's pusher), contact_regions per finger at the final depth (see
     :func:`contact_regions`; per finger also n_stick, n_slip), grip nodes, with an adversary
-    squeeze_status and push [m] (the last push displacement), scene parameters, and
+    squeeze_status and push [m] (the last push displacement), scene parameters (a band's nu is
+    None and its method "band"; a placed scene's placement s [m] and angle [rad]), and
     ``timings`` [s] if given.
     """
     res = trimmed(res)
@@ -438,14 +439,20 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
         out["squeeze_status"] = Status(int(res.squeeze_status)).name
         out["push"] = float(np.asarray(res.push)[-1])
     if scene is not None:
+        from ..geometry.mesh import Mesh
+
+        solid = isinstance(scene.mesh, Mesh)            # a band has no ν and one build
         out["target_depth"] = float(scene.depth)
         out["scene"] = dict(
             nodes=int(scene.mesh.n) if hasattr(scene.mesh, "n") else None,
             boundary_nodes=int(len(scene.boundary_nodes())),
-            E=float(scene.material.E), nu=float(scene.material.nu),
+            E=float(scene.material.E), nu=float(scene.material.nu) if solid else None,
             thickness=float(scene.material.thickness), radius=float(scene.fingers.radius),
             friction=float(scene.friction), friction_model=scene.friction_model, contact=scene.contact,
-            method=scene.method)
+            method=scene.method if solid else "band")
+        if scene.placement is not None:
+            out["scene"]["placement"] = dict(s=[float(v) for v in np.asarray(scene.placement.s)],
+                                             angle=float(scene.placement.angle))
     if timings is not None:
         out["timings"] = {k: float(v) for k, v in timings.items()}
     return json_ready(out)

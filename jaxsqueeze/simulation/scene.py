@@ -253,6 +253,11 @@ class Scene:
         return dataclasses.replace(self, **changes)
 
     def __post_init__(self):
+        from ..mechanics.band import Band
+
+        if not isinstance(self.mesh, (Mesh, Band)):
+            raise TypeError(f"Scene.mesh must be a jsq.Mesh (jsq.shapes.*, jsq.read_mesh) or a band "
+                            f"(jsq.band.Band), got {type(self.mesh).__name__}")
         if self.friction_model not in FRICTION_MODELS:
             raise ValueError(f"friction_model={self.friction_model!r}; choose one of {FRICTION_MODELS}.")
         if self.contact not in CONTACT_MODELS:

@@ -270,7 +270,7 @@ RULES: tuple[Rule, ...] = (
          "(a wider bracket places events anywhere in a step)", "use the default (None: step * 1e-4)"),
     Rule("settings.newton_tol", _r_newton_tol, f"a finite tolerance [rad] above 10 * eps (reachable in this "
          f"precision) and at most {NEWTON_MAX:g} rad", "use the default (None: 1e-11 in float64, 1e-5 in float32)"),
-    Rule("settings.gap_tol", _r_gap_tol, f"a finite tolerance > 0 m, at most {GAP_SHARE:g} of the object's size",
+    Rule("settings.gap_tol", _r_gap_tol, f"a finite tolerance > 0 m, at most {GAP_SHARE:.0%} of the object's size",
          "use the default (None: 1e-9 of the object's size in float64)"),
     Rule("grip", _r_grip, "two different boundary nodes",
          "pick nodes from mesh.boundary (e.g. Scene.nearest_boundary_node)"),

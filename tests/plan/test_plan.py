@@ -141,6 +141,10 @@ def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
     assert b.outcome == jsq.Status.SUCCESS
     np.testing.assert_array_equal(b.grip, square.grip)
     np.testing.assert_allclose(b.total_force[-1], a.total_force[-1], rtol=1e-9, atol=1e-12)
+    from jaxsqueeze.post import views          # the summary says where the fingers were placed
+    placed = views.summary(b, square.replace(grip=None, placement=pl))["scene"]
+    assert placed["placement"] == dict(s=[float(v) for v in pl.s], angle=0.0)
+    assert "placement" not in views.summary(a, square)["scene"]
 
 
 def test_jacfwd_in_placement_matches_central_differences(ellipse):

@@ -181,6 +181,7 @@ def test_cli_runs_band_scene(runs, name, tmp_path):
     assert s["status"] == res.outcome.name
     assert s["relative_depth"] == pytest.approx(SCENES[name][1], rel=1e-9)
     assert s["scene"]["contact"] == "point" and s["grip_nodes"] == list(scene.grip)
+    assert s["scene"]["nu"] is None and s["scene"]["method"] == "band"          # a band has neither
     for f in (0, 1):
         np.testing.assert_allclose(s["total_force"][f"finger{f}"], res.total_force[-1, f], rtol=1e-9)
     with meshio.xdmf.TimeSeriesReader(str(out / "squeeze.xdmf")) as reader:

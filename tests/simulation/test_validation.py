@@ -267,7 +267,7 @@ def test_mixed_units():
     (dict(material=None), TypeError, "Scene.material must be a jsq.Material, got NoneType"),
     (dict(fingers=0.01), TypeError, "Scene.fingers must be a jsq.Fingers, got float"),
     (dict(settings=None), TypeError, "Scene.settings must be a jsq.Settings"),
-    (dict(settings=jsq.Settings(gap_tol=1.0)), ValueError, "settings.gap_tol = 1.0: expected .* at most 0.01 of the object's size"),
+    (dict(settings=jsq.Settings(gap_tol=1.0)), ValueError, "settings.gap_tol = 1.0: expected .* at most 1% of the object's size"),
     (dict(method="Sparse"), ValueError, "method='Sparse'; choose one of"),
     (dict(contact="point", adversary=jsq.Adversary(s=0.05, push=1e-3)), ValueError, "an Adversary needs contact='segment'"),
     (dict(method=["sparse"]), ValueError, r"method=\['sparse'\]; choose one of"),
@@ -279,6 +279,13 @@ def test_wrong_types_and_sizes_are_named(square, change, error, message):
     string arithmetic, a numpy ufunc or an attribute error deep inside before)."""
     with pytest.raises(error, match=message):
         jsq.squeeze(_scene(square, **change))
+
+
+def test_a_scene_without_an_object_is_named():
+    """Scene(mesh=None) raised AttributeError: 'NoneType' object has no attribute 'm'."""
+    with pytest.raises(TypeError, match=r"Scene.mesh must be a jsq.Mesh .* got NoneType"):
+        jsq.Scene(mesh=None, material=jsq.Material(E=1e5, nu=0.3, thickness=0.01), fingers=jsq.Fingers(radius=0.01),
+                  grip=(0, 5))
 
 
 def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
