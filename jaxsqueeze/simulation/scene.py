@@ -226,7 +226,7 @@ class Scene:
             them as it deforms).
         method: compliance build ("sparse", "dense", "spectral"); ignored for bands.
         settings: :class:`Settings`.
-        placement: a continuous :class:`Placement` (takes the place of ``grip``).
+        placement: a continuous :class:`Placement` (instead of ``grip``: give one of them).
         adversary: an :class:`Adversary` pushing after the squeeze (grasp quality).
 
     A pytree (MJX's rule: a field is a leaf if and only if it is a number): material,
@@ -275,6 +275,9 @@ class Scene:
                              "(event A), so the pusher would pass through the object without touching it.")
         if self.grip is None and self.placement is None:
             raise ValueError("a Scene needs grip=(i, j) (two boundary nodes) or placement=Placement(s=(s0, s1)).")
+        if isinstance(self.placement, Placement) and numeric(self.grip):
+            raise ValueError(f"a Scene takes grip={self.grip!r} or placement={self.placement!r}, not both: "
+                             "use scene.replace(grip=None, placement=...) or scene.replace(placement=None, grip=...).")
         if numeric(self.grip) and self.placement is None:
             g = np.asarray(self.grip)
             if g.shape[-1:] != (2,) or not np.issubdtype(g.dtype, np.integer):

@@ -281,11 +281,15 @@ def test_wrong_types_and_sizes_are_named(square, change, error, message):
         jsq.squeeze(_scene(square, **change))
 
 
-def test_a_scene_without_an_object_is_named():
-    """Scene(mesh=None) raised AttributeError: 'NoneType' object has no attribute 'm'."""
+def test_a_scene_without_an_object_or_with_two_grips_is_named(square):
+    """Scene(mesh=None) raised AttributeError: 'NoneType' object has no attribute 'm'; a grip
+    given to a placed scene was silently ignored (the placement won)."""
     with pytest.raises(TypeError, match=r"Scene.mesh must be a jsq.Mesh .* got NoneType"):
         jsq.Scene(mesh=None, material=jsq.Material(E=1e5, nu=0.3, thickness=0.01), fingers=jsq.Fingers(radius=0.01),
                   grip=(0, 5))
+    placed = _scene(square).replace(grip=None, placement=jsq.Placement(s=(0.0, 0.2)))
+    with pytest.raises(ValueError, match=r"a Scene takes grip=\(1, 3\) or placement=.*, not both"):
+        placed.replace(grip=(1, 3))
 
 
 def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
