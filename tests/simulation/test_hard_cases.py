@@ -127,7 +127,8 @@ def test_millimetres_and_metres_give_the_same_physics(base):
     scene = base_scene(big, fingers=jsq.Fingers(radius=0.015 * k), depth=0.012 * k,
                        settings=jsq.Settings(step=0.012 / 50 * k))
     assert scene.grip == base_scene().grip
-    res = squeeze_ok(scene)
+    with pytest.warns(UserWarning, match="the object is 100 m across; every length is in metres"):
+        res = squeeze_ok(scene)                      # scaled on purpose: it works, and it warns of mixed units
     assert kinds(res) == kinds(base)
     np.testing.assert_array_equal(np.asarray(res.modes), np.asarray(base.modes))
     np.testing.assert_allclose(event_depths(res), k * event_depths(base), rtol=1e-10)
