@@ -197,6 +197,21 @@ def test_a_mesh_file_in_millimetres_warns(tmp_path):
     assert not scenefile.load(os.path.join(ROOT, "examples", "foam_disk.toml")).warnings
 
 
+def test_a_grip_point_midway_between_two_nodes_warns():
+    """(0, -0.05) on a square meshed at 8 mm lies midway between two boundary nodes: which one
+    it snapped to was round-off (the same file in mm picked the other, a slanted grip). The
+    shipped scenes put their points on nodes and say nothing."""
+    text = ('[object]\nshape = "rectangle"\nwidth = 0.1\nheight = 0.1\nmax_edge = 0.008\n[material]\nE = 1e5\n'
+            "nu = 0.3\nthickness = 0.0254\n[fingers]\nradius = 0.01\n[grip]\npoints = [[0.0, -0.05], [0.0, 0.05]]\n"
+            "[squeeze]\ndepth = 0.005\n")
+    said = scenefile.load_text(text).warnings
+    assert len(said) == 2 and all(w.startswith("grip.points: point ") and "(a tie broken by round-off)" in w
+                                  for w in said), said
+    assert not scenefile.load_text(text.replace("0.008", "0.01")).warnings          # a node at x = 0
+    for name in ("foam_square", "heart_band", "leaf_band"):
+        assert not scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", f"{name}.toml")).warnings, name
+
+
 def test_grip_nodes_of_a_mesh_file_with_unused_nodes_are_refused(tmp_path):
     """A mesh file whose node 0 is used by no triangle (gmsh writes a circle's centre): the
     reader drops it and renumbers the rest (``mesh.source`` maps back), so grip.nodes in the
