@@ -428,7 +428,8 @@ def _log(model: Model, st: State, flag, kinds, finger, d):
 
 def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     """The contact set just past d*, judged from the solve at d* and its rate (the probe
-    d* + η to first order). Returns (mode, finger, theta, changed, unsettled, peeled).
+    d* + η to first order). Returns (mode, finger, theta, changed, unsettled, logged, kinds):
+    ``logged`` (m,) the nodes whose change is an event of the log, of kinds ``kinds`` (m,).
 
     Coulomb and full stick: on the first pass a new contact that would pull at the probe is
     dropped (in float32: whose force's rate is not positive, as its value is round-off); under
@@ -454,7 +455,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         finger = jnp.where(inside, near, ns.finger).astype(jnp.int32)
         theta = jnp.where(inside, ang, ns.theta)
         changed = jnp.any(inside | drop)
-        return mode, finger, theta, changed, changed & (st.checks + 1 >= SETTLE_ITERS), jnp.zeros_like(inside)
+        kinds = jnp.where(inside, 0, 1)                     # A: joins, B: lets go
+        return mode, finger, theta, changed, changed & (st.checks + 1 >= SETTLE_ITERS), inside | drop, kinds
     test = st.added & (st.checks == 0)
     # at d* a contact just made carries almost no force. In float32 that value is round-off
     # (the foam square's node 89 chattered in and out at 12.0 mm until STALLED), so the sign
@@ -469,7 +471,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     held, _ = _per_finger(model, ns.mode, ns.finger)
     peeled = on & (sol.fn < -share * jnp.max(jnp.abs(sol.F))) & (st.checks < SETTLE_ITERS) & jnp.all(held > 0)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
-    return mode, ns.finger, ns.theta, jnp.any(mode != ns.mode), jnp.array(False), peeled
+    return mode, ns.finger, ns.theta, jnp.any(mode != ns.mode), jnp.array(False), peeled, jnp.ones_like(mode)
 
 
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
@@ -477,14 +479,14 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     it, update the slots and solve again at d*; else accept the row (and stop with STALLED
     when the event undid itself at the depth it started from: it would repeat forever).
     Returns (state, accept)."""
-    mode, finger, theta, changed, unsettled, peeled = _hypothesis(model, st, sol, dsol)
+    mode, finger, theta, changed, unsettled, logged, kinds = _hypothesis(model, st, sol, dsol)
     again = changed & ~unsettled & (st.fault == RUNNING)      # a faulted run stops at this row
 
     def retry():
         ns = st.nodes
         nodes = Nodes(mode, finger, theta, ns.armed & (mode == ns.mode))
         added = (st.added | (ns.mode == FREE)) & (mode > FREE)
-        events, n_ev, fault = _log(model, st, peeled, jnp.ones_like(mode), ns.finger, d_star)
+        events, n_ev, fault = _log(model, st, logged, kinds, finger, d_star)
         return _with(st, nodes=nodes, added=added, checks=st.checks + 1, events=events, n_ev=n_ev, fault=fault)
 
     stalled = (jnp.all(st.nodes.mode == st.before) & (d_star <= st.d)) | unsettled

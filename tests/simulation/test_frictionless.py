@@ -113,3 +113,21 @@ def test_steps_that_land_where_the_drift_spring_used_to_cancel_succeed(step, dep
     assert res.outcome == jsq.Status.SUCCESS and res.final_depth == pytest.approx(depth, rel=1e-12)
     fn, ft, on = radial_split(res)
     assert np.abs(ft[on]).max() <= 1e-10 * np.abs(np.asarray(res.forces)).max()
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_every_contact_change_is_in_the_event_log(runs, name):
+    """Replaying the log (A joins, B lets go) from the grip gives every recorded row's contact
+    set. Nodes that joined, and contacts that let go, while the frictionless contact set
+    settled after an event were not logged (the foam square: 4 rows where 2 nodes joined
+    and 1 A was logged)."""
+    res = runs[name]
+    nodes, depth = np.asarray(res.nodes), np.asarray(res.depth)
+    rows = res.events.rows()
+    assert len(rows) == int(res.n_events) and (len(rows) > 10 or name != "foam square")
+    for r in range(len(depth)):
+        on = {int(g) for g in res.grip}
+        for d, n, kind, _ in rows:
+            if d <= depth[r]:
+                on = on | {n} if kind == "A" else on - {n} if kind == "B" else on
+        assert on == set(nodes[np.asarray(res.modes[r]) > 0].tolist()), (r, depth[r])
