@@ -39,9 +39,7 @@ def trimmed(res):
     count = getattr(res, "count", None)
     if count is None:
         return res
-    if np.ndim(count) != 0:
-        raise ValueError(f"a batched result (count has shape {np.shape(count)}); pick one lane first, e.g. "
-                         "jax.tree.map(lambda a: a[i], res)")
+    res._one("a view or plot")                       # one concrete squeeze, else what to do
     k, e = int(count), int(res.n_events)
     if k == len(np.asarray(res.depth)) and e == len(np.asarray(res.events.depth)):
         return res

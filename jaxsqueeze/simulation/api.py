@@ -247,6 +247,10 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     if reverse_mode((scene, op)):
         raise TypeError(REVERSE_MODE)
     concrete = is_concrete(scene)
+    if throw and not concrete:
+        raise ValueError("throw=True raises on the status, which is traced under jax.jit, vmap and jacfwd: "
+                         "leave it out there and read result.status (Status.SUCCESS is 0) or result.outcome "
+                         "after the call")
     op, grasp = _prepare(scene, op, concrete)
     cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)

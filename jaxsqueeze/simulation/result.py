@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..mechanics.operator import Compliance
+from ..tracing import is_concrete
 from .engine import Stats
 from .laws import EVENT_KINDS
 from .status import Status
@@ -30,6 +31,10 @@ class EventLog(NamedTuple):
     push displacement, as the result's ``push`` rows); node: (E,) mesh node index;
     kind: (E,) 0–3 for events A (new contact), B (break), C (stick→slip), D (slip→stick);
     finger: (E,) 0 for the still finger, 1 for the moving one, 2 for the adversary's.
+
+    An eager squeeze's log holds its events only. The log of a result from ``jax.jit`` or
+    ``squeeze(..., trim=False)`` keeps its fixed capacity (``Settings.max_events`` rows, the
+    first ``result.n_events`` valid): read ``result.trim().events``.
     """
 
     depth: jax.Array
@@ -131,9 +136,19 @@ class SqueezeResult:
     push_work: jax.Array
     squeeze_events: jax.Array
 
+    def _one(self, what: str) -> None:
+        """ValueError unless this is one concrete squeeze (not batched, not traced)."""
+        if np.ndim(self.count) != 0:
+            raise ValueError(f"{what} takes one squeeze, but this result is batched (count has shape "
+                             f"{np.shape(self.count)}); pick one lane first, e.g. jax.tree.map(lambda a: a[i], res)")
+        if not is_concrete(self.status):
+            raise ValueError(f"{what} needs a concrete result; under jax.jit, vmap or jacfwd the status is traced: "
+                             "return the result (or result.status) from the traced function and read it outside")
+
     @property
     def outcome(self) -> Status:
         """The status as a :class:`Status` (eager, unbatched results only)."""
+        self._one("result.outcome")
         return Status(int(self.status))
 
     @property
@@ -181,6 +196,7 @@ class SqueezeResult:
 
     def raise_for_status(self) -> "SqueezeResult":
         """Raise ``RuntimeError`` with advice unless the squeeze reached its target depth."""
+        self._one("result.raise_for_status()")
         if self.outcome != Status.SUCCESS:
             raise RuntimeError(f"squeeze ended with {self.outcome.name} at depth {float(self.final_depth):.6g} m: "
                                f"{self.outcome.advice}")
@@ -188,6 +204,7 @@ class SqueezeResult:
 
     def trim(self) -> "SqueezeResult":
         """This result without its padding rows, as numpy arrays (eager, unbatched only)."""
+        self._one("result.trim()")
         return trim(self)
 
 

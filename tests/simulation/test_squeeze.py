@@ -196,6 +196,15 @@ def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
     np.testing.assert_allclose(work[0], quality.squeeze_work(eager), rtol=1e-10)
     np.testing.assert_allclose(force[0], eager.grip_force, rtol=1e-10)
     assert quality.slip_margin(out, slanted.friction).shape == (3,)
+    # the one-squeeze methods say so (they were "only scalar arrays can be converted")
+    for call in (lambda: out.outcome, out.trim, out.raise_for_status):
+        with pytest.raises(ValueError, match=r"takes one squeeze, but this result is batched .*pick one lane"):
+            call()
+    # and under tracing they, and throw=True, say what to do instead of a ConcretizationTypeError
+    with pytest.raises(ValueError, match="throw=True raises on the status, which is traced under jax.jit"):
+        jax.jit(lambda d: jsq.squeeze(slanted.replace(depth=d), throw=True).grip_force)(d0)
+    with pytest.raises(ValueError, match="result.outcome needs a concrete result"):
+        jax.jit(lambda d: int(jsq.squeeze(slanted.replace(depth=d)).outcome))(d0)
 
 
 def test_vmap_over_grips_equals_loop(mesh, centred):
