@@ -189,10 +189,10 @@ class Settings:
 
     def slots(self, m: int, eager: bool = False) -> int:
         """The contact slots a squeeze of an object with m boundary nodes starts with:
-        ``capacity``, or under ``None`` min(``EAGER_SLOTS``, m) eagerly and ``TRACED_SLOTS``
-        traced."""
+        ``capacity`` (at most m: no more contacts exist), or under ``None`` min(``EAGER_SLOTS``,
+        m) eagerly and ``TRACED_SLOTS`` traced."""
         if self.capacity is not None:
-            return int(self.capacity)
+            return min(int(self.capacity), max(2, int(m)))
         return max(2, min(EAGER_SLOTS, int(m))) if eager else TRACED_SLOTS
 
     def sliding(self, capacity: int, eager: bool = False) -> int:

@@ -292,6 +292,17 @@ def test_a_scene_without_an_object_or_with_two_grips_is_named(square):
         placed.replace(grip=(1, 3))
 
 
+def test_a_capacity_beyond_the_boundary_nodes_is_clipped_to_them(square):
+    """Settings(capacity=100000) on a 20-node boundary was refused for 1.5e3 GiB of slots that
+    can never hold a contact (and capacity=3000 allocated them); no more contacts than boundary
+    nodes exist, so the slots stop at m."""
+    from jaxsqueeze.simulation import api
+    sc = _scene(square, settings=jsq.Settings(capacity=100_000))
+    m = len(sc.boundary_nodes())
+    assert api.config_of(sc).capacity == m and not V.scene_cost_problems(sc)
+    assert api.config_of(_scene(square, settings=jsq.Settings(capacity=8))).capacity == 8 < m
+
+
 def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
     """depth 95 % of the object returned SUCCESS with inverted triangles and no word; now the
     eager squeeze warns, and so does the CLI for a relative_depth (it only checked a depth).
