@@ -74,7 +74,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
 
     import jaxsqueeze as jsq
     from ..plan import quality as Q
-    from ..plan.search import _check_search, grasp_map, optimize_placement, quality_of
+    from ..plan.search import check_search, grasp_map, optimize_placement, quality_of
     from ..post import plots as figures
     from ..post.maps import plot_grasp_map
     from ..post.views import json_ready
@@ -103,7 +103,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
         raise ValueError(f"plan.optimizer={settings.optimizer!r} is not an optax optimizer taking a learning "
                          "rate; use e.g. \"adam\", \"sgd\" or \"adabelief\"") from None
     try:
-        _check_search(opt, settings.steps, settings.starts, None, None)     # before the map, not after it
+        check_search(opt, settings.steps, settings.starts, None, None)     # before the map, not after it
     except ValueError as e:
         raise ValueError(f"plan.optimizer={settings.optimizer!r}: {e}") from None
     op = scene.operator()

@@ -391,7 +391,7 @@ class Search(NamedTuple):
     screened: int = 0
 
 
-def _check_search(optimizer, steps, starts, budget, init) -> None:
+def check_search(optimizer, steps, starts, budget, init) -> None:
     """ValueError/TypeError for arguments :func:`optimize_placement` cannot use, before any squeeze."""
     _check_count("steps", steps, 0)
     _check_count("starts", starts, 1)
@@ -436,7 +436,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     """
     import optax
 
-    _check_search(optimizer, steps, starts, budget, init)
+    check_search(optimizer, steps, starts, budget, init)
     init = None if init is None else candidates(init, "init")
     op = _check(scene, np.zeros((1, 3)) if init is None else init, op)
     qfn = quality_of(scene, quality)
