@@ -101,3 +101,14 @@ def check_states(res, mesh, mu, friction_model="coulomb", rtol=1e-7):
             slide = pos | neg
             assert np.allclose(np.abs(ft[slide]), mu * fn[slide], atol=tol, rtol=1e-6), f"row {k}: slip force off the edge"
             assert np.all(ft[pos] <= tol) and np.all(ft[neg] >= -tol), f"row {k}: friction does not oppose sliding"
+
+
+def sliding_against_friction(res, tol=1e-12):
+    """(k, 2) array of (row, node index) where a node sliding in one mode over two consecutive
+    rows moved against that mode (mode 2 toward larger polar angles, 3 toward smaller): its
+    friction would then push it the way it moves. Empty for a sound squeeze (an unarmed jam,
+    docs/numerics.md §6, may do it; the cases that call this have none)."""
+    th, md = np.asarray(res.theta), np.asarray(res.modes)
+    same = (md[1:] == md[:-1]) & (md[1:] >= 2)
+    sign = np.where(md[1:] == 2, 1.0, -1.0)
+    return np.argwhere(same & (sign * np.diff(th, axis=0) < -tol)) + [1, 0]

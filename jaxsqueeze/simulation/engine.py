@@ -261,8 +261,9 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
 def _arm(armed, sol: Solution):
     """Event D fires when the slip rate *crosses* zero. A node whose slip starts with an
     inconsistent rate (a jam: neither sticking nor sliding is consistent there) keeps
-    sliding with its force on the cone edge until its rate has been consistent once.
-    This keeps every force admissible and rules out C/D chatter at one depth."""
+    sliding with its force on the cone edge until its rate has been consistent once (at an
+    accepted row, or in a solve of the contact set at an event depth). This keeps every force
+    admissible and rules out C/D chatter at one depth."""
     return armed | (sol.rate > 0)
 
 
@@ -426,6 +427,17 @@ def _log(model: Model, st: State, flag, kinds, finger, d):
     return events, n_ev, jnp.where(n_ev > E, Status.EVENT_OVERFLOW, st.fault).astype(jnp.int32)
 
 
+def _reversed(model: Model, st: State, sol: Solution, mode):
+    """(m,) the armed sliding contacts whose slip rate is inconsistent in ``sol``, a solve at an
+    event depth: an event keeps every force (a contact starts and ends unloaded) but changes
+    the other contacts' rates, so these stick there (event D; ADVANCE sees only rates that
+    change sign within a step). None when a finger's contacts all slide in ``mode``: the
+    squeeze fails at this row, and a stick would only start C/D chatter at one depth."""
+    ns = st.nodes
+    n_on, n_slid = _per_finger(model, mode, ns.finger)
+    return (ns.mode >= SLIP_POS) & ns.armed & (sol.rate < 0) & ~jnp.any(n_slid == n_on)
+
+
 def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     """The contact set just past d*, judged from the solve at d* and its rate (the probe
     d* + η to first order). Returns (mode, finger, theta, changed, unsettled, logged, kinds):
@@ -437,7 +449,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
-    contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row).
+    contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row). Under Coulomb,
+    an armed sliding contact whose slip rate turned inconsistent at d* sticks there, a D event
+    (an event keeps every force but changes the other contacts' rates).
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
@@ -463,15 +477,22 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # of the force's rate decides; in float64 the value at the probe d* + η does
     pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32 else (fn <= 0))
     mode = jnp.where(pull, FREE, ns.mode)
+    on = (ns.mode > FREE) & ~test
+    theta, stuck = ns.theta, jnp.zeros_like(on)
     if model.cfg.slip_events:
         out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
         mode = jnp.where(out, jnp.where(ft < 0, SLIP_POS, SLIP_NEG), mode)
-    on = (ns.mode > FREE) & ~test
+        # D at d*, judged once the new contacts' hypotheses hold
+        stuck = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out)
+        mode = jnp.where(stuck, STICK, mode)
+        theta = jnp.where(stuck, st.slots.spread()(sol.th, ns.theta), theta)
     share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
     held, _ = _per_finger(model, ns.mode, ns.finger)
     peeled = on & (sol.fn < -share * jnp.max(jnp.abs(sol.F))) & (st.checks < SETTLE_ITERS) & jnp.all(held > 0)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
-    return mode, ns.finger, ns.theta, jnp.any(mode != ns.mode), jnp.array(False), peeled, jnp.ones_like(mode)
+    stuck = stuck & ~peeled
+    return (mode, ns.finger, theta, jnp.any(mode != ns.mode), jnp.array(False), peeled | stuck,
+            jnp.where(stuck, 3, 1).astype(jnp.int32))
 
 
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
@@ -484,7 +505,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
 
     def retry():
         ns = st.nodes
-        nodes = Nodes(mode, finger, theta, ns.armed & (mode == ns.mode))
+        nodes = Nodes(mode, finger, theta, _arm(ns.armed, sol) & (mode == ns.mode))
         added = (st.added | (ns.mode == FREE)) & (mode > FREE)
         events, n_ev, fault = _log(model, st, logged, kinds, finger, d_star)
         return _with(st, nodes=nodes, added=added, checks=st.checks + 1, events=events, n_ev=n_ev, fault=fault)

@@ -71,7 +71,9 @@ class SqueezeResult:
     status: () int, a :class:`Status` value.
     depth: (k,) squeeze depth [m].
     modes: (k, m) int8 per boundary node: 0 free, 1 stick, 2 slip toward larger polar
-        angle, 3 slip toward smaller polar angle.
+        angle, 3 slip toward smaller polar angle. Frictionless contacts are all 2: without
+        friction a contact's force does not depend on its direction of sliding, which is
+        not tracked (``theta`` says where it went).
     finger: (k, m) int8 finger (0 or 1) of contact nodes.
     theta: (k, m) polar angle of contact nodes about their fingertip centre, finger frame [rad].
     forces: (k, m, 2) contact force each fingertip exerts on the object [N].

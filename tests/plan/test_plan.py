@@ -10,7 +10,7 @@ import pytest
 import jaxsqueeze as jsq
 from jaxsqueeze import plan
 from jaxsqueeze.plan import quality as Q
-from physics import nearest, symmetric_square
+from physics import check_states, nearest, sliding_against_friction, symmetric_square
 
 MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
 
@@ -350,6 +350,24 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
     ax = plots.plot_deformed(res, sc.mesh, details=False).axes[0]
     radii = sorted(p.radius for p in ax.patches if isinstance(p, Circle))
     np.testing.assert_allclose(radii, [10.0] * 3, rtol=1e-6)         # [mm]: both fingertips and the pusher
+
+
+def test_a_push_that_reverses_a_slip_sticks_the_node_where_the_push_starts(square):
+    """Slanted grip, mu = 0.25: two contacts slide at the end of the squeeze. The push (from
+    the squeezed state, fingers still) reverses one's slip rate at once, so it sticks at the
+    push's first instant (event D where the pusher touches: ADVANCE only sees a rate that
+    changes sign within a step, not one already inconsistent). The engine once let it slide on against its friction for three push
+    rows."""
+    grip = (nearest(square.mesh, (-0.005, -0.05)), nearest(square.mesh, (0.005, 0.05)))
+    sc = square.replace(grip=grip, friction=0.25, fingers=jsq.Fingers(radius=0.02),
+                        adversary=plan.Adversary(s=0.05, push=0.003))
+    res = jsq.squeeze(sc)
+    assert int(res.squeeze_status) == jsq.Status.SUCCESS and res.outcome == jsq.Status.SUCCESS
+    k = int(res.squeeze_events)
+    pushed = [(kind, d) for d, _, kind, _ in res.events.rows()[k:]]
+    assert pushed[0][0] == "A" and pushed[1] == ("D", pushed[0][1]) and pushed[0][1] < 1e-9   # the pusher touches
+    assert sliding_against_friction(res).size == 0
+    check_states(res, sc.mesh, 0.25)
 
 
 def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):

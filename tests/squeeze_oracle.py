@@ -1,0 +1,502 @@
+"""An independent NumPy oracle of a two-finger squeeze (Guo, Lin and Jia, Sections II-IV).
+
+Written from the paper alone (it shares no code with jaxsqueeze's engine, contacts, laws,
+bordered, operator or linalg modules); it only follows the library's documented conventions
+(README, DESIGN.md, docs/numerics.md, the docstrings of Scene/Fingers/SqueezeResult):
+
+* Plane-stress constant-strain triangles, energy (1); K is (2n, 2n), DOFs interleaved
+  x0, y0, x1, y1, ...; the physical matrix is E * thickness * K_hat.
+* Compliance the paper's way (Section III-A): a dense symmetric eigendecomposition of K,
+  dropping its three smallest (rigid, zero) eigenvalues; A = sum_k v_k v_k^T / lambda_k on
+  the contact DOFs and B = the normalized rigid modes w_x, w_y, w_r (node centroid at the
+  origin) at the contact DOFs. The bordered system (4) [[A, B], [B^T, 0]] (f, g) = (d, 0)
+  gives the contact forces f and the rigid part g; the displacement of any node is (3).
+* Fingers (Section IV): finger 0 is still, finger 1 moves by the depth d along the unit
+  vector from its grip node to finger 0's grip node (undeformed positions); each centre
+  starts one radius out along the outward boundary normal at its grip node (the normalized
+  sum of the unit normals of the two adjacent boundary edges).
+* A contact node on finger f lies on the tip circle: x = C_f(d) + r (cos t, sin t).
+  A sticking node keeps its anchor angle t (no rotation); a sliding node's angle is an
+  unknown fixed by eq. (6): its force on the edge of the friction cone that opposes its
+  slip. Modes: 1 stick, 2 slip toward larger polar angle (tangential force f.t = -mu f.n),
+  3 slip toward smaller polar angle (f.t = +mu f.n); n = (cos t, sin t), t = (-sin t, cos t).
+  Frictionless contacts slide with f.t = 0 (labelled 2 or 3 by the sign of their angle rate).
+* Events: A a free boundary node enters a tip circle (gap < -gap_tol); B a contact's normal
+  force f.n becomes negative; C a sticking force leaves its cone (mu f.n - |f.t| < 0);
+  D a sliding node's slip rate s * dtheta/dd becomes negative (s = +1 for mode 2, -1 for 3),
+  (with the documented slack of 1e-7 rad outside the cone, CONE_SLACK),
+  evaluated only once the node's rate has been positive (the documented "armed" rule,
+  docs/numerics.md section 6). A new contact is hypothesized sticking (Section IV-B.1): if
+  the rate of its force (from two probes slightly deeper) leaves the cone it slides on the
+  edge it leaves through. Events found in one bisection bracket are applied together (mirror-
+  symmetric pairs share a depth).
+* Failure: every contact on one finger sliding (Coulomb only) -> "SLIP_FAILURE"; a finger
+  without contacts -> "LOST_CONTACT"; else "SUCCESS" at the target depth.
+
+Units: everything is computed in scaled units (lengths / L, forces / (E h L), L the largest
+extent of the object) and returned in SI.
+
+Models: "coulomb" (friction mu), "stick" (mu = inf: contacts never slide), "frictionless"
+(mu = 0: contacts always slide). The slip angles are solved by Newton's method with an
+analytic Jacobian; dtheta/dd comes from the implicit function theorem; events are located by
+bisection on the depth to ``depth_tol``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+KINDS = "ABCD"
+#: a force within this angle [rad] outside its friction cone still counts as inside (the library's
+#: documented convention, docs/numerics.md finding 2: a grip exactly on the cone edge is inside)
+CONE_SLACK = 1e-7
+
+
+def cone_margin(fn, ft, mu):
+    """|f| sin(phi + CONE_SLACK - psi): > 0 inside the cone, psi the force's angle from the normal."""
+    phi = np.arctan(mu)
+    psi = np.arctan2(np.abs(ft), fn)
+    return np.hypot(fn, ft) * np.sin(phi + CONE_SLACK - psi)
+
+
+# ----------------------------------------------------------------------------- FEM
+def cst_stiffness(points, triangles, nu):
+    """Dense plane-stress CST stiffness (2n, 2n) for E = 1, thickness = 1 (any length unit)."""
+    P = np.asarray(points, float)
+    T = np.asarray(triangles, int)
+    n = len(P)
+    K = np.zeros((2 * n, 2 * n))
+    D = np.array([[1, nu, 0], [nu, 1, 0], [0, 0, (1 - nu) / 2]]) / (1 - nu ** 2)
+    for tri in T:
+        x, y = P[tri, 0], P[tri, 1]
+        area = 0.5 * ((x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]))
+        if area <= 0:
+            raise ValueError("triangles must be counterclockwise with positive area")
+        b = np.array([y[1] - y[2], y[2] - y[0], y[0] - y[1]])
+        c = np.array([x[2] - x[1], x[0] - x[2], x[1] - x[0]])
+        Bm = np.zeros((3, 6))
+        Bm[0, 0::2] = b
+        Bm[1, 1::2] = c
+        Bm[2, 0::2] = c
+        Bm[2, 1::2] = b
+        Bm /= 2 * area
+        k = area * Bm.T @ D @ Bm
+        dofs = np.ravel(np.c_[2 * tri, 2 * tri + 1])
+        K[np.ix_(dofs, dofs)] += k
+    return K
+
+
+def rigid_basis(points):
+    """Orthonormal null-space basis (2n, 3): normalized w_x, w_y, w_r (Section II), points centred."""
+    P = np.asarray(points, float)
+    n = len(P)
+    W = np.zeros((2 * n, 3))
+    W[0::2, 0] = 1
+    W[1::2, 1] = 1
+    W[0::2, 2] = -P[:, 1]
+    W[1::2, 2] = P[:, 0]
+    return W / np.linalg.norm(W, axis=0)
+
+
+def spectral_compliance(K, points):
+    """The paper's pseudo-inverse of K (2n, 2n): eigendecomposition, the three smallest
+    (rigid) eigenvalues dropped; and the normalized rigid basis (2n, 3)."""
+    lam, V = np.linalg.eigh(K)
+    order = np.argsort(lam)
+    lam, V = lam[order], V[:, order]
+    if not (np.all(np.abs(lam[:3]) < 1e-9 * lam[-1]) and lam[3] > 1e-9 * lam[-1]):
+        raise ValueError(f"K must have exactly 3 zero eigenvalues (got {lam[:5]})")
+    Vp = V[:, 3:]
+    G = (Vp / lam[3:]) @ Vp.T
+    return G, rigid_basis(points)
+
+
+def loop_normals(p):
+    """Outward unit normals at the nodes of a closed ccw loop (k, 2): normalized sum of the
+    unit outward normals of the two adjacent edges."""
+    e = np.roll(p, -1, axis=0) - p                      # edge i: p_i -> p_{i+1}
+    ne = np.c_[e[:, 1], -e[:, 0]] / np.linalg.norm(e, axis=1)[:, None]   # outward for ccw
+    s = ne + np.roll(ne, 1, axis=0)
+    return s / np.linalg.norm(s, axis=1)[:, None]
+
+
+# ----------------------------------------------------------------------------- configuration
+@dataclass
+class Contact:
+    finger: int
+    mode: int            # 1 stick, 2 slip +, 3 slip -
+    angle: float         # anchor (stick) or current angle (slip) [rad]
+    armed: bool = True   # D may fire (the rate was consistent once)
+
+
+@dataclass
+class Event:
+    kind: str
+    node: int            # mesh index
+    depth: float         # [m]
+    finger: int
+
+
+@dataclass
+class OracleResult:
+    status: str
+    final_depth: float
+    forces: np.ndarray        # (m, 2) [N] per boundary position (mesh.boundary order)
+    modes: np.ndarray         # (m,) 0 free, 1 stick, 2/3 slip
+    finger: np.ndarray        # (m,) finger of contact nodes (-1 free)
+    theta: np.ndarray         # (m,) polar angle of contact nodes (nan free)
+    boundary_displacement: np.ndarray   # (m, 2) [m]
+    events: list = field(default_factory=list)
+    total_force: np.ndarray = None      # (2, 2) [N] per finger
+    g: np.ndarray = None
+    centres: np.ndarray = None          # (2, 2) [m]
+    nodes: np.ndarray = None            # (m,) mesh indices
+
+    def contact_set(self):
+        return {int(self.nodes[k]): (int(self.finger[k]), int(self.modes[k])) for k in np.flatnonzero(self.modes > 0)}
+
+
+class Squeeze:
+    """One squeeze in scaled units. ``P`` (m, 2) boundary points / L; ``Gbb`` (2m, 2m) the
+    boundary block of K^+ (scaled); ``Nb`` (2m, 3) the rigid basis on the boundary."""
+
+    def __init__(self, points, triangles, boundary, nu, radius, grip, model, mu, normals=None):
+        pts = np.asarray(points, float)
+        pts = pts - pts.mean(0)
+        self.L = float(np.ptp(pts, axis=0).max())
+        self.pts = pts / self.L
+        self.bnd = np.asarray(boundary, int)
+        self.m = len(self.bnd)
+        K = cst_stiffness(self.pts, triangles, nu)
+        G, W = spectral_compliance(K, self.pts)
+        dofs = np.ravel(np.c_[2 * self.bnd, 2 * self.bnd + 1])
+        self.Gbb = G[np.ix_(dofs, dofs)]
+        self.Nb = W[dofs]
+        self.P = self.pts[self.bnd]
+        self.normals = loop_normals(self.P) if normals is None else np.asarray(normals, float)
+        self.r = radius / self.L
+        pos = {int(v): k for k, v in enumerate(self.bnd)}
+        self.grip = (pos[int(grip[0])], pos[int(grip[1])])
+        i, j = self.grip
+        self.C0 = np.array([self.P[i] + self.r * self.normals[i], self.P[j] + self.r * self.normals[j]])
+        u = self.P[i] - self.P[j]
+        self.u = u / np.linalg.norm(u)
+        self.model = model
+        self.mu = mu
+
+    def centres(self, d):
+        C = self.C0.copy()
+        C[1] = C[1] + d * self.u
+        return C
+
+    # --------------------------------------------------------------- one configuration
+    def _system(self, keys, cfg):
+        idx = np.ravel([[2 * k, 2 * k + 1] for k in keys])
+        A = self.Gbb[np.ix_(idx, idx)]
+        B = self.Nb[idx]
+        s2 = len(idx)
+        M = np.zeros((s2 + 3, s2 + 3))
+        M[:s2, :s2] = A
+        M[:s2, s2:] = B
+        M[s2:, :s2] = B.T
+        return M, idx
+
+    def solve(self, cfg, d, guess=None, tol=1e-13, iters=60):
+        """Forces (s, 2), g (3,), angles (s,), angle rates dtheta/dd (s,) of configuration
+        ``cfg`` (dict pos -> Contact) at depth d (scaled); Newton on the sliding angles."""
+        keys = sorted(cfg)
+        s = len(keys)
+        M, idx = self._system(keys, cfg)
+        C = self.centres(d)
+        fing = np.array([cfg[k].finger for k in keys])
+        th = np.array([cfg[k].angle for k in keys], float)
+        if guess is not None:
+            th = np.array([guess.get(k, cfg[k].angle) if cfg[k].mode >= 2 else cfg[k].angle for k in keys])
+        slip = np.array([cfg[k].mode >= 2 for k in keys], bool)
+        sgn = np.array([1.0 if cfg[k].mode == 2 else -1.0 for k in keys])
+        mu = 0.0 if self.model == "frictionless" else self.mu
+        Pk = self.P[keys]
+        lu = np.linalg.inv(M)      # small (2s + 3); fine for an oracle
+        sl = np.flatnonzero(slip)
+
+        def forces(th):
+            e = np.c_[np.cos(th), np.sin(th)]
+            dvec = C[fing] + self.r * e - Pk
+            z = lu @ np.r_[dvec.ravel(), np.zeros(3)]
+            return z[:2 * s].reshape(s, 2), z[2 * s:], e
+
+        def resid(f, e):
+            t = np.c_[-e[:, 1], e[:, 0]]
+            fn = np.sum(f * e, 1)
+            ft = np.sum(f * t, 1)
+            return (ft + sgn * mu * fn)[sl], fn, ft, t
+
+        ok = True
+        for it in range(iters):
+            f, g, e = forces(th)
+            R, fn, ft, t = resid(f, e)
+            if len(sl) == 0:
+                break
+            # Jacobian: dR_k/dtheta_j
+            cols = np.zeros((2 * s + 3, len(sl)))
+            for a, k in enumerate(sl):
+                cols[2 * k:2 * k + 2, a] = self.r * t[k]
+            dF = (lu @ cols)[:2 * s].reshape(s, 2, len(sl))
+            w = t + (sgn * mu)[:, None] * e
+            J = np.einsum("kc,kca->ka", w, dF)[sl]
+            J[np.arange(len(sl)), np.arange(len(sl))] += (-fn + sgn * mu * ft)[sl]
+            step = np.linalg.solve(J, -R)
+            th[sl] += step
+            if np.abs(step).max() < tol:
+                f, g, e = forces(th)
+                R, fn, ft, t = resid(f, e)
+                break
+        else:
+            ok = False
+        # angle rates by the implicit function theorem
+        rate = np.zeros(s)
+        if len(sl):
+            cols = np.zeros((2 * s + 3, len(sl)))
+            for a, k in enumerate(sl):
+                cols[2 * k:2 * k + 2, a] = self.r * t[k]
+            dF = (lu @ cols)[:2 * s].reshape(s, 2, len(sl))
+            w = t + (sgn * mu)[:, None] * e
+            J = np.einsum("kc,kca->ka", w, dF)[sl]
+            J[np.arange(len(sl)), np.arange(len(sl))] += (-fn + sgn * mu * ft)[sl]
+            rd = np.zeros(2 * s + 3)
+            for k in range(s):
+                if fing[k] == 1:
+                    rd[2 * k:2 * k + 2] = self.u
+            dFd = (lu @ rd)[:2 * s].reshape(s, 2)
+            Rd = np.sum(w * dFd, 1)[sl]
+            rate[sl] = -np.linalg.solve(J, Rd)
+        U = (self.Gbb[:, idx] @ f.ravel() + self.Nb @ g).reshape(-1, 2)
+        return dict(keys=keys, f=f, g=g, theta=th, rate=rate, fn=fn, ft=ft, U=U, C=C, ok=ok,
+                    resid=np.abs(R).max(initial=0.0))
+
+    # --------------------------------------------------------------- event functions
+    def triggers(self, cfg, st, gap_tol, ftol, rtol):
+        """Events whose condition holds in solution ``st`` of ``cfg``: list of (kind, pos, finger, value)."""
+        out = []
+        X = self.P + st["U"]
+        for f in (0, 1):
+            gap = np.linalg.norm(X - st["C"][f], axis=1) - self.r
+            for k in np.flatnonzero(gap < -gap_tol):
+                if int(k) not in cfg:
+                    out.append(("A", int(k), f, gap[k]))
+        for a, k in enumerate(st["keys"]):
+            c = cfg[k]
+            if st["fn"][a] < -ftol:
+                out.append(("B", k, c.finger, st["fn"][a]))
+            if self.model == "coulomb" and c.mode == 1:
+                marg = cone_margin(st["fn"][a], st["ft"][a], self.mu)
+                if marg < -ftol:
+                    out.append(("C", k, c.finger, marg))
+            if self.model == "coulomb" and c.mode >= 2 and c.armed:
+                s = 1.0 if c.mode == 2 else -1.0
+                if s * st["rate"][a] < -rtol:
+                    out.append(("D", k, c.finger, s * st["rate"][a]))
+        return out
+
+
+def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, friction, depth,
+                   model="coulomb", normals=None, step=None, depth_tol=1e-12, gap_tol=1e-9,
+                   probe=1e-6, max_events=500):
+    """Simulate a squeeze (see the module docstring) and return an :class:`OracleResult`.
+
+    Args:
+        points (n, 2) [m], triangles (t, 3) ccw, boundary (m,) outer loop ccw (mesh indices).
+        E [Pa], nu, thickness [m]: material; radius [m]: fingertip radius.
+        grip (i, j): mesh node indices touched by finger 0 (still) and finger 1 (moving).
+        friction: mu (``inf`` selects the all-stick model, 0 the frictionless one).
+        depth [m]: target squeeze depth.
+        model: "coulomb", "stick" or "frictionless" (forced by friction = inf / 0).
+        normals: (m, 2) outward normals at the boundary nodes; default: own loop normals.
+        step: depth step [m] between event checks (default depth / 50).
+        depth_tol: bracket width of an event depth, relative to the object size L.
+        gap_tol: penetration relative to L at which event A fires.
+        probe: extra squeeze (relative to L) at which a new contact's stick hypothesis is tested.
+    """
+    if np.isinf(friction):
+        model = "stick"
+    if friction == 0 and model == "coulomb":
+        model = "frictionless"
+    sq = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals)
+    L = sq.L
+    Fs = E * thickness * L
+    D = depth / L
+    h = (step / L) if step is not None else D / 50
+    ftol, rtol = 1e-14, 1e-10
+
+    # initial contacts: the grip nodes, touching at d = 0 (force 0); stick unless frictionless
+    cfg = {}
+    for f, k in enumerate(sq.grip):
+        v = sq.P[k] - sq.C0[f]
+        mode = 2 if model == "frictionless" else 1
+        cfg[k] = Contact(f, mode, float(np.arctan2(v[1], v[0])))
+    events = []
+    d = 0.0
+    st = sq.solve(cfg, d)
+    status = "SUCCESS"
+    if model == "coulomb":
+        # a grip inside both cones sticks; test at a probe depth as for any new contact
+        cfg, st = _hypothesis(sq, cfg, set(cfg), d, probe, ftol)
+        status = _failure(sq, cfg)
+    guard = 0
+    while status == "SUCCESS" and d < D * (1 - 1e-14):
+        d1 = min(d + h, D)
+        guess = {k: th for k, th in zip(st["keys"], st["theta"])}
+        st1 = sq.solve(cfg, d1, guess)
+        trig = sq.triggers(cfg, st1, gap_tol, ftol * _fscale(st1), rtol)
+        if not trig:
+            d, st = d1, st1
+            _arm(cfg, st, rtol)
+            _update_angles(cfg, st)
+            continue
+        lo, hi = d, d1
+        st_hi = st1
+        while hi - lo > depth_tol:
+            mid = 0.5 * (lo + hi)
+            sm = sq.solve(cfg, mid, guess)
+            if sq.triggers(cfg, sm, gap_tol, ftol * _fscale(sm), rtol):
+                hi, st_hi = mid, sm
+            else:
+                lo = mid
+        trig = sq.triggers(cfg, st_hi, gap_tol, ftol * _fscale(st_hi), rtol)
+        d = hi
+        _update_angles(cfg, st_hi)
+        new = set()
+        for kind, k, f, _ in trig:
+            events.append(Event(kind, int(sq.bnd[k]), d * L, f))
+            if kind == "A":
+                v = sq.P[k] + st_hi["U"][k] - st_hi["C"][f]
+                cfg[k] = Contact(f, 2 if model == "frictionless" else 1, float(np.arctan2(v[1], v[0])), armed=False)
+                new.add(k)
+            elif kind == "B":
+                del cfg[k]
+            elif kind == "C":
+                a = st_hi["keys"].index(k)
+                cfg[k].mode = 2 if st_hi["ft"][a] < 0 else 3
+                cfg[k].armed = False
+            elif kind == "D":
+                cfg[k].mode = 1
+        cfg, st = _hypothesis(sq, cfg, new, d, probe, ftol)
+        status = _failure(sq, cfg)
+        guard += 1
+        if guard > max_events:
+            status = "EVENT_OVERFLOW"
+    return _result(sq, cfg, st, status, d, events, E, thickness)
+
+
+def _fscale(st):
+    return max(np.abs(st["f"]).max(initial=0.0), 1e-300)
+
+
+def _update_angles(cfg, st):
+    for k, th in zip(st["keys"], st["theta"]):
+        if cfg[k].mode >= 2:
+            cfg[k].angle = float(th)
+
+
+def _arm(cfg, st, rtol):
+    for a, k in enumerate(st["keys"]):
+        c = cfg[k]
+        if c.mode >= 2 and not c.armed:
+            s = 1.0 if c.mode == 2 else -1.0
+            if s * st["rate"][a] > 0:
+                c.armed = True
+
+
+def _hypothesis(sq, cfg, new, d, probe, ftol):
+    """New contacts start sticking. Their force grows from zero: a force rate (the difference of
+    the forces at d + probe and d + 2 probe, which drops the tiny push of the gap_tol
+    penetration the contact was found at) outside the cone turns the node into a slider on
+    the edge it leaves through (frictionless contacts: labelled by their angle rate)."""
+    if new:
+        st1 = sq.solve(cfg, d + probe)
+        st2 = sq.solve(cfg, d + 2 * probe)
+        for a, k in enumerate(st1["keys"]):
+            if k not in new:
+                continue
+            c = cfg[k]
+            dfn, dft = st2["fn"][a] - st1["fn"][a], st2["ft"][a] - st1["ft"][a]
+            if sq.model == "coulomb" and c.mode == 1:
+                if cone_margin(dfn, dft, sq.mu) < 0:
+                    c.mode = 2 if dft < 0 else 3
+        if sq.model == "frictionless":
+            st = sq.solve(cfg, d + probe)
+            for a, k in enumerate(st["keys"]):
+                if k in new:
+                    cfg[k].mode = 2 if st["rate"][a] >= 0 else 3
+    st = sq.solve(cfg, d)
+    _arm(cfg, st, 0)
+    return cfg, st
+
+
+def _failure(sq, cfg):
+    for f in (0, 1):
+        mine = [c for c in cfg.values() if c.finger == f]
+        if not mine:
+            return "LOST_CONTACT"
+        if sq.model == "coulomb" and all(c.mode >= 2 for c in mine):
+            return "SLIP_FAILURE"
+    return "SUCCESS"
+
+
+def _result(sq, cfg, st, status, d, events, E, h):
+    L, Fs = sq.L, E * h * sq.L
+    m = sq.m
+    F = np.zeros((m, 2))
+    modes = np.zeros(m, int)
+    finger = -np.ones(m, int)
+    theta = np.full(m, np.nan)
+    for a, k in enumerate(st["keys"]):
+        F[k] = st["f"][a] * Fs
+        modes[k] = cfg[k].mode
+        finger[k] = cfg[k].finger
+        theta[k] = st["theta"][a]
+    tot = np.array([F[finger == f].sum(0) for f in (0, 1)])
+    return OracleResult(status=status, final_depth=d * L, forces=F, modes=modes, finger=finger, theta=theta,
+                        boundary_displacement=st["U"] * L, events=events, total_force=tot, g=st["g"],
+                        centres=st["C"] * L, nodes=sq.bnd.copy())
+
+
+def from_mesh(mesh, E, nu, thickness, radius, grip, friction, depth, **kw):
+    """:func:`squeeze_oracle` on a jaxsqueeze ``Mesh`` (points, triangles, boundary loop)."""
+    return squeeze_oracle(np.asarray(mesh.points), np.asarray(mesh.triangles), np.asarray(mesh.boundary),
+                          E, nu, thickness, radius, grip, friction, depth, **kw)
+
+
+def invariants(res: OracleResult, boundary_points, radius, mu, model="coulomb"):
+    """Largest violations of the end state's invariants, relative to the largest force (forces)
+    or the object size L (lengths): force and torque balance, contact nodes on their tip circle,
+    free nodes outside both tips (negative = penetration), stick forces inside the cone, slide
+    forces on the edge opposing their mode."""
+    P0 = np.asarray(boundary_points, float)
+    F = res.forces
+    sc = max(np.abs(F).max(), 1e-300)
+    L = float(np.ptp(P0, axis=0).max())
+    X = P0 + res.boundary_displacement
+    on = res.modes > 0
+    C = res.centres[np.where(on, res.finger, 0)]
+    rel = X - C
+    dist = np.linalg.norm(rel, axis=1)
+    nrm = rel / np.maximum(dist, 1e-300)[:, None]
+    fn = np.sum(F * nrm, 1)
+    ft = nrm[:, 0] * F[:, 1] - nrm[:, 1] * F[:, 0]
+    stick, pos, neg = res.modes == 1, res.modes == 2, res.modes == 3
+    out = dict(
+        force_balance=np.abs(F.sum(0)).max() / sc,
+        torque_balance=abs(np.sum(P0[:, 0] * F[:, 1] - P0[:, 1] * F[:, 0])) / (sc * L),
+        off_circle=np.abs(dist[on] - radius).max(initial=0) / L,
+        min_free_gap=min(np.min(np.linalg.norm(X[~on] - res.centres[f], axis=1) - radius, initial=np.inf)
+                         for f in (0, 1)) / L,
+        pull=max(-fn[on].min(initial=0), 0) / sc)
+    if model == "coulomb":
+        out["stick_outside_cone"] = max(np.max(np.abs(ft[stick]) - mu * fn[stick], initial=0), 0) / sc
+        out["slide_off_edge"] = max(np.abs(ft[pos] + mu * fn[pos]).max(initial=0),
+                                    np.abs(ft[neg] - mu * fn[neg]).max(initial=0)) / sc
+    elif model == "frictionless":
+        out["tangential"] = np.abs(ft[on]).max(initial=0) / sc
+    return out
