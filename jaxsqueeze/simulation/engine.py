@@ -482,8 +482,11 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     if model.cfg.slip_events:
         out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
         mode = jnp.where(out, jnp.where(ft < 0, SLIP_POS, SLIP_NEG), mode)
-        # D at d*, judged once the new contacts' hypotheses hold
-        stuck = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out)
+        # D at d*, judged once the new contacts' hypotheses hold; one node per pass, the most
+        # reversed (a stick changes its neighbours' rates again)
+        cand = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out)
+        worst = jnp.argmin(jnp.where(cand, sol.rate, jnp.inf))
+        stuck = cand & (jnp.arange(cand.shape[0]) == worst)
         mode = jnp.where(stuck, STICK, mode)
         theta = jnp.where(stuck, st.slots.spread()(sol.th, ns.theta), theta)
     share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
