@@ -15,21 +15,34 @@ bordered, operator or linalg modules); it only follows the library's documented 
   vector from its grip node to finger 0's grip node (undeformed positions); each centre
   starts one radius out along the outward boundary normal at its grip node (the normalized
   sum of the unit normals of the two adjacent boundary edges).
-* A contact node on finger f lies on the tip circle: x = C_f(d) + r (cos t, sin t).
-  A sticking node keeps its anchor angle t (no rotation); a sliding node's angle is an
-  unknown fixed by eq. (6): its force on the edge of the friction cone that opposes its
-  slip. Modes: 1 stick, 2 slip toward larger polar angle (tangential force f.t = -mu f.n),
-  3 slip toward smaller polar angle (f.t = +mu f.n); n = (cos t, sin t), t = (-sin t, cos t).
+* Fingertip rotation (Section IV-D): optional schedules alpha_f(d) [rad], polynomials in d [m]
+  (``rotation`` (2, k), highest power first, numpy.polyval order); each tip turns about its
+  own centre. Every polar angle t is in the finger's local frame; its world angle is
+  t + alpha_f(d), which replaces t in the position below, in eqs. (5), (6) and in the C/D
+  conditions. Without ``rotation`` alpha = 0 (the code path is the same).
+* A contact node on finger f lies on the tip circle: x = C_f(d) + r (cos(t + a_f), sin(t + a_f)).
+  A sticking node keeps its anchor angle t in the finger frame (it turns with the tip); a
+  sliding node's local angle is an unknown fixed by eq. (6): its force on the edge of the
+  friction cone that opposes its slip relative to the tip, i.e. the rate of its LOCAL angle.
+  Modes: 1 stick, 2 slip toward larger polar angle (tangential force f.t = -mu f.n),
+  3 slip toward smaller polar angle (f.t = +mu f.n); n = (cos w, sin w), t = (-sin w, cos w),
+  w = t + alpha_f the world angle; "larger/smaller" refer to the local angle (slip relative to
+  the tip).
   Frictionless contacts slide with f.t = 0 (labelled 2 or 3 by the sign of their angle rate).
 * Events: A a free boundary node enters a tip circle (gap < -gap_tol); B a contact's normal
   force f.n becomes negative; C a sticking force leaves its cone (mu f.n - |f.t| < 0);
-  D a sliding node's slip rate s * dtheta/dd becomes negative (s = +1 for mode 2, -1 for 3),
+  D a sliding node's slip rate s * dtheta/dd becomes negative (s = +1 for mode 2, -1 for 3;
+  theta the finger-frame angle, so the rate is the slip relative to the rotating tip),
   (with the documented slack of 1e-7 rad outside the cone, CONE_SLACK),
   evaluated only once the node's rate has been positive (the documented "armed" rule,
   docs/numerics.md section 6). A new contact is hypothesized sticking (Section IV-B.1): if
   the rate of its force (from two probes slightly deeper) leaves the cone it slides on the
   edge it leaves through. Events found in one bisection bracket are applied together (mirror-
   symmetric pairs share a depth).
+* D at an event depth: after the events of one depth are applied (and the new contacts'
+  hypotheses settled), armed sliding nodes whose rate is negative stick there (D events at
+  that depth), one at a time, the most negative rate first, re-solving after each, until no
+  armed rate is negative or the squeeze fails.
 * Failure: every contact on one finger sliding (Coulomb only) -> "SLIP_FAILURE"; a finger
   without contacts -> "LOST_CONTACT"; else "SUCCESS" at the target depth.
 
@@ -145,13 +158,14 @@ class OracleResult:
     forces: np.ndarray        # (m, 2) [N] per boundary position (mesh.boundary order)
     modes: np.ndarray         # (m,) 0 free, 1 stick, 2/3 slip
     finger: np.ndarray        # (m,) finger of contact nodes (-1 free)
-    theta: np.ndarray         # (m,) polar angle of contact nodes (nan free)
+    theta: np.ndarray         # (m,) polar angle of contact nodes, finger frame (nan free)
     boundary_displacement: np.ndarray   # (m, 2) [m]
     events: list = field(default_factory=list)
     total_force: np.ndarray = None      # (2, 2) [N] per finger
     g: np.ndarray = None
     centres: np.ndarray = None          # (2, 2) [m]
     nodes: np.ndarray = None            # (m,) mesh indices
+    alpha: np.ndarray = None            # (2,) fingertip rotations [rad] at the final depth
 
     def contact_set(self):
         return {int(self.nodes[k]): (int(self.finger[k]), int(self.modes[k])) for k in np.flatnonzero(self.modes > 0)}
@@ -161,7 +175,7 @@ class Squeeze:
     """One squeeze in scaled units. ``P`` (m, 2) boundary points / L; ``Gbb`` (2m, 2m) the
     boundary block of K^+ (scaled); ``Nb`` (2m, 3) the rigid basis on the boundary."""
 
-    def __init__(self, points, triangles, boundary, nu, radius, grip, model, mu, normals=None):
+    def __init__(self, points, triangles, boundary, nu, radius, grip, model, mu, normals=None, rotation=None):
         pts = np.asarray(points, float)
         pts = pts - pts.mean(0)
         self.L = float(np.ptp(pts, axis=0).max())
@@ -184,6 +198,23 @@ class Squeeze:
         self.u = u / np.linalg.norm(u)
         self.model = model
         self.mu = mu
+        # rotation schedules: coefficients in d [m] (highest power first); evaluated at d * L
+        self.rot = None if rotation is None else np.atleast_2d(np.asarray(rotation, float))
+        if self.rot is not None and self.rot.shape[0] != 2:
+            raise ValueError("rotation must have shape (2, k)")
+
+    def alpha(self, d):
+        """(2,) fingertip rotations [rad] at scaled depth d."""
+        if self.rot is None:
+            return np.zeros(2)
+        return np.array([np.polyval(c, d * self.L) for c in self.rot])
+
+    def dalpha(self, d):
+        """(2,) d alpha / d d per scaled depth (rad per L)."""
+        if self.rot is None:
+            return np.zeros(2)
+        return np.array([np.polyval(np.polyder(c), d * self.L) * self.L if len(c) > 1 else 0.0
+                         for c in self.rot])
 
     def centres(self, d):
         C = self.C0.copy()
@@ -209,7 +240,9 @@ class Squeeze:
         s = len(keys)
         M, idx = self._system(keys, cfg)
         C = self.centres(d)
-        fing = np.array([cfg[k].finger for k in keys])
+        fing = np.array([cfg[k].finger for k in keys], int).reshape(-1)
+        al = self.alpha(d)[fing]            # world angle = local angle + al
+        dal = self.dalpha(d)[fing]
         th = np.array([cfg[k].angle for k in keys], float)
         if guess is not None:
             th = np.array([guess.get(k, cfg[k].angle) if cfg[k].mode >= 2 else cfg[k].angle for k in keys])
@@ -221,7 +254,7 @@ class Squeeze:
         sl = np.flatnonzero(slip)
 
         def forces(th):
-            e = np.c_[np.cos(th), np.sin(th)]
+            e = np.c_[np.cos(th + al), np.sin(th + al)]
             dvec = C[fing] + self.r * e - Pk
             z = lu @ np.r_[dvec.ravel(), np.zeros(3)]
             return z[:2 * s].reshape(s, 2), z[2 * s:], e
@@ -264,15 +297,18 @@ class Squeeze:
             w = t + (sgn * mu)[:, None] * e
             J = np.einsum("kc,kca->ka", w, dF)[sl]
             J[np.arange(len(sl)), np.arange(len(sl))] += (-fn + sgn * mu * ft)[sl]
+            # partial d/dd at fixed local angles: the centre's motion, every node turning with
+            # its tip (r t alpha'), and the cone's own turn through n, t (same term as J's diagonal)
             rd = np.zeros(2 * s + 3)
             for k in range(s):
                 if fing[k] == 1:
                     rd[2 * k:2 * k + 2] = self.u
+                rd[2 * k:2 * k + 2] += self.r * t[k] * dal[k]
             dFd = (lu @ rd)[:2 * s].reshape(s, 2)
-            Rd = np.sum(w * dFd, 1)[sl]
+            Rd = (np.sum(w * dFd, 1) + (-fn + sgn * mu * ft) * dal)[sl]
             rate[sl] = -np.linalg.solve(J, Rd)
         U = (self.Gbb[:, idx] @ f.ravel() + self.Nb @ g).reshape(-1, 2)
-        return dict(keys=keys, f=f, g=g, theta=th, rate=rate, fn=fn, ft=ft, U=U, C=C, ok=ok,
+        return dict(keys=keys, f=f, g=g, theta=th, rate=rate, fn=fn, ft=ft, U=U, C=C, ok=ok, alpha=self.alpha(d),
                     resid=np.abs(R).max(initial=0.0))
 
     # --------------------------------------------------------------- event functions
@@ -302,7 +338,7 @@ class Squeeze:
 
 def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, friction, depth,
                    model="coulomb", normals=None, step=None, depth_tol=1e-12, gap_tol=1e-9,
-                   probe=1e-6, max_events=500):
+                   probe=1e-6, max_events=500, rotation=None):
     """Simulate a squeeze (see the module docstring) and return an :class:`OracleResult`.
 
     Args:
@@ -317,12 +353,14 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
         depth_tol: bracket width of an event depth, relative to the object size L.
         gap_tol: penetration relative to L at which event A fires.
         probe: extra squeeze (relative to L) at which a new contact's stick hypothesis is tested.
+        rotation: None or (2, k) polynomial coefficients of alpha_0(d), alpha_1(d) [rad], d in
+            metres, highest power first (the library's ``Fingers.rotation``).
     """
     if np.isinf(friction):
         model = "stick"
     if friction == 0 and model == "coulomb":
         model = "frictionless"
-    sq = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals)
+    sq = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals, rotation)
     L = sq.L
     Fs = E * thickness * L
     D = depth / L
@@ -334,15 +372,19 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
     for f, k in enumerate(sq.grip):
         v = sq.P[k] - sq.C0[f]
         mode = 2 if model == "frictionless" else 1
-        cfg[k] = Contact(f, mode, float(np.arctan2(v[1], v[0])))
+        cfg[k] = Contact(f, mode, float(np.arctan2(v[1], v[0]) - sq.alpha(0.0)[f]))
     events = []
     d = 0.0
     st = sq.solve(cfg, d)
     status = "SUCCESS"
-    if model == "coulomb":
+    if model == "coulomb" and sq.rot is None:
         # a grip inside both cones sticks; test at a probe depth as for any new contact
         cfg, st = _hypothesis(sq, cfg, set(cfg), d, probe, ftol)
         status = _failure(sq, cfg)
+    # with rotating tips the grip forces turn as d grows (the tip's twist adds a tangential
+    # push), so a grip on its cone edge may leave the cone after a few nm, at a depth the probe
+    # cannot resolve: the grip starts sticking and event C locates the exit by bisection
+    # (fuzz seed 1 #51: grip within CONE_SLACK of the edge, C at 1e-7 rad / alpha' = 4.2e-9 m)
     guard = 0
     while status == "SUCCESS" and d < D * (1 - 1e-14):
         d1 = min(d + h, D)
@@ -371,7 +413,8 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
             events.append(Event(kind, int(sq.bnd[k]), d * L, f))
             if kind == "A":
                 v = sq.P[k] + st_hi["U"][k] - st_hi["C"][f]
-                cfg[k] = Contact(f, 2 if model == "frictionless" else 1, float(np.arctan2(v[1], v[0])), armed=False)
+                cfg[k] = Contact(f, 2 if model == "frictionless" else 1,
+                                 float(np.arctan2(v[1], v[0]) - st_hi["alpha"][f]), armed=False)
                 new.add(k)
             elif kind == "B":
                 del cfg[k]
@@ -383,6 +426,28 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
                 cfg[k].mode = 1
         cfg, st = _hypothesis(sq, cfg, new, d, probe, ftol)
         status = _failure(sq, cfg)
+        if status == "SUCCESS" and model == "coulomb":
+            # D at an event depth (docs/numerics.md section 6): the events changed every rate; an
+            # armed sliding node whose slip rate is now negative sticks here. (Without this, a rate
+            # that is negative just after the event and positive again at the next step's end was
+            # never seen: found with rotating tips, fuzz seed 0 #37.)
+            # One node at a time, the most negative rate first, re-solving in between: sticking
+            # one node changes the others' rates (compare_rot.py case 04 at d = 9.67 mm: nodes 6 and 7
+            # both negative; with 7 stuck, 6's rate is +2.3e-2, while sticking both left 6 on its
+            # cone edge with its force turning out, C 6 1.2e-8 m later; the library sticks 7 only).
+            while status == "SUCCESS":
+                cand = [(s * st["rate"][a], a, k) for a, k in enumerate(st["keys"])
+                        for c in [cfg[k]] for s in [1.0 if c.mode == 2 else -1.0]
+                        if c.mode >= 2 and c.armed and s * st["rate"][a] < -rtol]
+                if not cand:
+                    break
+                _, a, k = min(cand)
+                c = cfg[k]
+                events.append(Event("D", int(sq.bnd[k]), d * L, c.finger))
+                c.mode = 1
+                c.angle = float(st["theta"][a])
+                st = sq.solve(cfg, d)
+                status = _failure(sq, cfg)
         guard += 1
         if guard > max_events:
             status = "EVENT_OVERFLOW"
@@ -420,7 +485,11 @@ def _hypothesis(sq, cfg, new, d, probe, ftol):
             if k not in new:
                 continue
             c = cfg[k]
-            dfn, dft = st2["fn"][a] - st1["fn"][a], st2["ft"][a] - st1["ft"][a]
+            # the force difference, resolved in st1's frame (the cone turns with the tip)
+            df = st2["f"][a] - st1["f"][a]
+            w1 = st1["theta"][a] + st1["alpha"][c.finger]
+            dfn = df[0] * np.cos(w1) + df[1] * np.sin(w1)
+            dft = -df[0] * np.sin(w1) + df[1] * np.cos(w1)
             if sq.model == "coulomb" and c.mode == 1:
                 if cone_margin(dfn, dft, sq.mu) < 0:
                     c.mode = 2 if dft < 0 else 3
@@ -459,7 +528,7 @@ def _result(sq, cfg, st, status, d, events, E, h):
     tot = np.array([F[finger == f].sum(0) for f in (0, 1)])
     return OracleResult(status=status, final_depth=d * L, forces=F, modes=modes, finger=finger, theta=theta,
                         boundary_displacement=st["U"] * L, events=events, total_force=tot, g=st["g"],
-                        centres=st["C"] * L, nodes=sq.bnd.copy())
+                        centres=st["C"] * L, nodes=sq.bnd.copy(), alpha=st["alpha"])
 
 
 def from_mesh(mesh, E, nu, thickness, radius, grip, friction, depth, **kw):
@@ -499,4 +568,9 @@ def invariants(res: OracleResult, boundary_points, radius, mu, model="coulomb"):
                                     np.abs(ft[neg] - mu * fn[neg]).max(initial=0)) / sc
     elif model == "frictionless":
         out["tangential"] = np.abs(ft[on]).max(initial=0) / sc
+    if res.alpha is not None:
+        # theta is the finger-frame angle: world angle = theta + alpha of the node's finger
+        world = np.arctan2(rel[:, 1], rel[:, 0])
+        al = res.alpha[np.where(on, res.finger, 0)]
+        out["theta_frame"] = np.abs(np.angle(np.exp(1j * (world - al - res.theta))))[on].max(initial=0)
     return out

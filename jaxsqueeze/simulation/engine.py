@@ -58,6 +58,8 @@ PEEL_SHARE = (1e-8, 1e-3)
 #: below this fraction of the row's largest contact force (docs/numerics.md §5.1); beyond it the
 #: object would slide away along its drift and the squeeze stops with STALLED
 DRIFT_SHARE = 1e-2
+#: a free node this many gap tolerances inside a fingertip after an event: STALLED (no consistent set)
+SUNK_TOLS = 10
 
 
 # ----------------------------------------------------------------------------- loop state
@@ -494,7 +496,10 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     peeled = on & (sol.fn < -share * jnp.max(jnp.abs(sol.F))) & (st.checks < SETTLE_ITERS) & jnp.all(held > 0)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled
-    return (mode, ns.finger, theta, jnp.any(mode != ns.mode), jnp.array(False), peeled | stuck,
+    # a release that drops a tangential force (full stick: a fingertip that turns drags its
+    # contacts until one pulls) can land a node inside a fingertip: no contact set is consistent
+    sunk = jnp.any((ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol))
+    return (mode, ns.finger, theta, jnp.any(mode != ns.mode), sunk, peeled | stuck,
             jnp.where(stuck, 3, 1).astype(jnp.int32))
 
 

@@ -45,9 +45,11 @@ _ADVICE = {
                        "within the precision: float32 overflows near 1e38)."),
     Status.EVENT_OVERFLOW: "The event log is full. Raise Settings.max_events.",
     Status.STALLED: ("No consistent contact set exists at this depth: a node touched a fingertip but as a contact "
-                     "it would pull, or (frictionless) holding the object in place would take more than 1 % "
-                     "tangential force, i.e. the object would slide out sideways (an asymmetric frictionless "
-                     "grip). Grip nearer a symmetry line, refine the mesh near the contact, or use Coulomb friction."),
+                     "it would pull, or a released contact would land inside its fingertip (full stick with "
+                     "turning fingertips: use Coulomb friction), or (frictionless) holding the object in place "
+                     "would take more than 1 % tangential force, i.e. the object would slide out sideways (an "
+                     "asymmetric frictionless grip). Grip nearer a symmetry line, refine the mesh near the "
+                     "contact, or use Coulomb friction."),
     Status.INFEASIBLE_GRIP: ("The segment between the two grip nodes leaves a friction cone, so the squeeze "
                              "cannot start (Section I-A), or a placed fingertip (or the adversary's pusher, "
                              "when result.squeeze_status is SUCCESS) cannot touch the object from outside where "

@@ -385,6 +385,26 @@ def test_a_finger_peeling_off_releases_its_contacts_at_one_depth():
     assert res.depth[-2] < res.final_depth and np.all(np.isfinite(res.forces))     # one row for both releases
 
 
+def test_a_release_that_lands_a_node_inside_a_fingertip_stalls():
+    """Full stick with turning tips (found by the rotating oracle): tip 1 drags its grip node 134
+    sideways until its normal force reaches zero while it still carries 1.1 N of shear. Event B
+    drops that shear and the node lands 4.8e-4 L inside the tip: sticking needs a pull, release
+    a penetration, so no contact set is consistent there. The squeeze stops with STALLED at
+    that row (it went on with the node inside the tip, SUCCESS); every row before it holds."""
+    import dataclasses
+    mesh = symmetric_square(0.1, 0.01)
+    sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
+                   fingers=jsq.Fingers(radius=0.03, rotation=[[-27.5, 0.0], [33.5, 0.0]]),
+                   grip=(6, 134), friction=0.5, depth=0.015, friction_model="stick")
+    res = jsq.squeeze(sc)
+    assert res.status == jsq.Status.STALLED and res.final_depth == pytest.approx(0.011933, abs=1e-6)
+    assert res.events.rows()[-1][1:] == (134, "B", 1)
+    check_states(dataclasses.replace(res, count=res.count - 1), mesh, 0.5, "stick")
+    k = list(np.asarray(res.nodes)).index(134)
+    x = mesh.points[mesh.boundary][k] + np.asarray(res.boundary_displacement[-1][k])
+    assert np.linalg.norm(x - np.asarray(res.centres[-1][1])) - 0.03 < -1e-4 * 0.1      # the last row: inside
+
+
 def test_step_bound_returns_max_steps():
     res = squeeze_ok(base_scene(settings=jsq.Settings(max_steps=3)), (jsq.Status.MAX_STEPS,))
     assert res.final_depth < 0.012 and int(res.count) == 4

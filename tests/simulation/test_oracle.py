@@ -5,7 +5,9 @@ eigendecomposition of K, the three rigid modes dropped), its own bordered solve 
 slip-angle Newton (eq. 6) and event location by bisection on the depth. Both must give the same
 outcome, final depth, per-node contact forces (1e-6 of the largest), contact nodes, fingers and
 stick/slip modes, and the same event sequence (kind, node, finger) at the same depths (1e-6 L;
-they agree to ~1e-12 L). Meshes stay below ~150 nodes so that the module runs in seconds.
+they agree to ~1e-12 L). With turning fingertips (``rotation``) the oracle puts a node at world
+angle theta + alpha_f(d): a sticking node keeps its finger-frame angle theta, and D watches the
+slip relative to the tip; the finger-frame angles (``res.theta``) must agree too. Meshes stay below ~150 nodes so that the module runs in seconds.
 """
 import numpy as np
 import pytest
@@ -116,3 +118,71 @@ def test_slip_reversal_at_a_new_contact_gives_event_d():
     ev_o = _canonical([(e.kind, e.node, e.depth, e.finger) for e in o.events], L)
     assert [e[:2] for e in ev_l] == [e[:2] for e in ev_o]
     assert ("A", 11) in [e[:2] for e in ev_l] and ("D", 12) in [e[:2] for e in ev_l]
+
+
+# ----------------------------------------------------------------------------- turning fingertips (Section IV-D)
+# (mu, radius [m], depth [m], rotation coefficients (highest power first, d in m), outcome, event kinds);
+# one radius, depth and coefficient shape (2, 3), so that the library compiles the squeeze once
+ROTATING = {
+    # at d = 9.67 mm node 31 joins and two sliding nodes (6, 7) both reverse: sticking 7 alone is
+    # consistent (6's rate turns positive), sticking both leaves 6 on its cone edge turning out
+    "mu=0.15 tips turn opposite ways (A, B, C, D; D at an event depth)":
+        (0.15, 0.02, 0.015, [[0.0, -40.0, 0.0], [0.0, 40.0, 0.0]], "SUCCESS", "ABCD"),
+    "mu=0.3 quadratic schedules": (0.3, 0.02, 0.015, [[2000.0, 10.0, 0.0], [-1500.0, 20.0, 0.0]], "SUCCESS", "ABC"),
+    "mu=0.15 tips turn apart, with offsets": (0.15, 0.02, 0.015, [[0.0, 30.0, 0.3], [0.0, -30.0, 1.0]], "SUCCESS", "ABCD"),
+}
+
+
+@pytest.mark.parametrize("name", list(ROTATING))
+def test_rotating_squeeze_matches_the_oracle(meshes, name):
+    mu, radius, depth, rot, outcome, kinds = ROTATING[name]
+    mesh = meshes["square"]
+    grip = (jsq.scene.nearest_boundary_node(mesh, SLANTED[0]), jsq.scene.nearest_boundary_node(mesh, SLANTED[1]))
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=NU, thickness=H),
+                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
+    res = jsq.squeeze(scene)
+    o = from_mesh(mesh, E, NU, H, radius, grip, mu, depth, rotation=rot)
+    L = float(np.ptp(mesh.points, axis=0).max())
+
+    assert res.outcome.name == o.status == outcome
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
+    assert np.array_equal(np.asarray(res.nodes), o.nodes)
+    np.testing.assert_allclose(np.asarray(res.alpha[-1])[:2], [np.polyval(c, o.final_depth) for c in rot], atol=1e-12)
+
+    F = np.asarray(res.final_forces)
+    scale = np.abs(o.forces).max()
+    np.testing.assert_allclose(F, o.forces, rtol=0, atol=1e-6 * scale)
+    np.testing.assert_allclose(np.asarray(res.total_force[-1]), o.total_force, rtol=0, atol=1e-6 * scale)
+
+    mode, finger = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
+    on = mode > 0
+    assert np.array_equal(on, o.modes > 0), "contact sets differ"
+    assert np.array_equal(finger[on], o.finger[on]), "contact fingers differ"
+    assert np.array_equal(mode, o.modes), "stick/slip modes differ"
+    # finger-frame polar angles (the library's res.theta) agree modulo 2 pi
+    dth = np.angle(np.exp(1j * (np.asarray(res.theta[-1]) - o.theta)))[on]
+    assert np.abs(dth).max() <= 1e-6
+
+    ev_l = _canonical([(k, n, d, f) for d, n, k, f in res.events.rows()], L)
+    ev_o = _canonical([(e.kind, e.node, e.depth, e.finger) for e in o.events], L)
+    assert [(k, n, f) for k, n, _, f in ev_l] == [(k, n, f) for k, n, _, f in ev_o]
+    assert set(k for k, *_ in ev_o) == set(kinds)
+    assert max((abs(a[2] - b[2]) for a, b in zip(ev_l, ev_o)), default=0.0) <= 1e-6 * L
+
+
+def test_a_constant_rotation_offset_changes_nothing_physical(meshes):
+    """rotation = [[0, 0, c0], [0, 0, c1]]: the tips start turned and never turn, so forces and
+    events equal the unturned squeeze's and the finger-frame angles shift by -c."""
+    mesh = meshes["square"]
+    grip = (jsq.scene.nearest_boundary_node(mesh, SLANTED[0]), jsq.scene.nearest_boundary_node(mesh, SLANTED[1]))
+    base = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=NU, thickness=H), fingers=jsq.Fingers(radius=0.02),
+                     grip=grip, friction=0.3, depth=0.015)
+    c = (0.4, -0.7)
+    a = jsq.squeeze(base)
+    b = jsq.squeeze(base.replace(fingers=jsq.Fingers(radius=0.02, rotation=[[0.0, 0.0, c[0]], [0.0, 0.0, c[1]]])))
+    np.testing.assert_allclose(b.final_forces, a.final_forces, rtol=0, atol=1e-9 * np.abs(a.final_forces).max())
+    assert [e[1:] for e in a.events.rows()] == [e[1:] for e in b.events.rows()] and len(a.events.rows()) > 0
+    on = np.asarray(a.modes[-1]) > 0
+    shift = np.angle(np.exp(1j * (np.asarray(b.theta[-1]) - np.asarray(a.theta[-1]) +
+                                  np.asarray(c)[np.asarray(a.finger[-1])])))[on]
+    assert np.abs(shift).max() <= 1e-9
