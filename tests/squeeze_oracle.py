@@ -134,6 +134,52 @@ def loop_normals(p):
     return s / np.linalg.norm(s, axis=1)[:, None]
 
 
+def loops_normals(P, loops):
+    """:func:`loop_normals` loop by loop (boundary points ordered as the loops)."""
+    out, start = [], 0
+    for size in loops:
+        out.append(loop_normals(P[start:start + size]))
+        start += size
+    return np.concatenate(out)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def _turn(n, a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([c * n[0] - s * n[1], s * n[0] + c * n[1]])
+
+
+def first_touch(x, o, v, r):
+    """(t, k): a circle of radius r whose centre moves along o + t v (unit v, from far behind)
+    first touches point k of x (m, 2) at t (the smaller root of |x_k - o - t v| = r, smallest
+    over the points; inf when it misses them all): docs/planning.md, "Approach"."""
+    w = x - o
+    b = w @ v
+    disc = b * b - np.sum(w * w, axis=1) + r * r
+    t = np.where(disc > 0, b - np.sqrt(np.where(disc > 0, disc, 1.0)), np.inf)
+    k = int(np.argmin(t))
+    return float(t[k]), k
+
+
+def inside_loops(P, loops, q):
+    """(k,) bool: points q (k, 2) inside the object bounded by the loops of P (even-odd rule)."""
+    q = np.atleast_2d(q)
+    nxt, start = [], 0
+    for size in loops:
+        nxt.append(start + (np.arange(size) + 1) % size)
+        start += size
+    nxt = np.concatenate(nxt)
+    a, b = P[None], P[nxt][None]
+    qq = q[:, None, :]
+    st = (a[..., 1] > qq[..., 1]) != (b[..., 1] > qq[..., 1])
+    dy = np.where(st, b[..., 1] - a[..., 1], 1.0)
+    xc = a[..., 0] + (qq[..., 1] - a[..., 1]) * (b[..., 0] - a[..., 0]) / dy
+    return np.sum(st & (qq[..., 0] < xc), axis=1) % 2 == 1
+
+
 # ----------------------------------------------------------------------------- configuration
 @dataclass
 class Contact:
@@ -165,7 +211,15 @@ class OracleResult:
     g: np.ndarray = None
     centres: np.ndarray = None          # (2, 2) [m]
     nodes: np.ndarray = None            # (m,) mesh indices
-    alpha: np.ndarray = None            # (2,) fingertip rotations [rad] at the final depth
+    alpha: np.ndarray = None            # (F,) fingertip rotations [rad] at the final depth
+    grip: tuple = None                  # mesh indices of the first contacts (finger 0, finger 1)
+    # the adversary's push (squeeze_oracle(adversary=...)); squeeze_status/events set on every result
+    squeeze_status: str = None
+    squeeze_events: int = 0
+    final_push: float = 0.0
+    adversary_work: float = None
+    finger_work: np.ndarray = None
+    failure_push: float = None
 
     def contact_set(self):
         return {int(self.nodes[k]): (int(self.finger[k]), int(self.modes[k])) for k in np.flatnonzero(self.modes > 0)}
@@ -175,27 +229,58 @@ class Squeeze:
     """One squeeze in scaled units. ``P`` (m, 2) boundary points / L; ``Gbb`` (2m, 2m) the
     boundary block of K^+ (scaled); ``Nb`` (2m, 3) the rigid basis on the boundary."""
 
-    def __init__(self, points, triangles, boundary, nu, radius, grip, model, mu, normals=None, rotation=None):
+    def __init__(self, points, triangles, boundary, nu, radius, grip, model, mu, normals=None, rotation=None,
+                 contact="segment", placement=None, loops=None):
         pts = np.asarray(points, float)
         pts = pts - pts.mean(0)
         self.L = float(np.ptp(pts, axis=0).max())
         self.pts = pts / self.L
         self.bnd = np.asarray(boundary, int)
         self.m = len(self.bnd)
+        self.loops = tuple(int(v) for v in loops) if loops is not None else (self.m,)
         K = cst_stiffness(self.pts, triangles, nu)
         G, W = spectral_compliance(K, self.pts)
         dofs = np.ravel(np.c_[2 * self.bnd, 2 * self.bnd + 1])
         self.Gbb = G[np.ix_(dofs, dofs)]
         self.Nb = W[dofs]
         self.P = self.pts[self.bnd]
-        self.normals = loop_normals(self.P) if normals is None else np.asarray(normals, float)
+        self.normals = loops_normals(self.P, self.loops) if normals is None else np.asarray(normals, float)
         self.r = radius / self.L
-        pos = {int(v): k for k, v in enumerate(self.bnd)}
-        self.grip = (pos[int(grip[0])], pos[int(grip[1])])
-        i, j = self.grip
-        self.C0 = np.array([self.P[i] + self.r * self.normals[i], self.P[j] + self.r * self.normals[j]])
-        u = self.P[i] - self.P[j]
-        self.u = u / np.linalg.norm(u)
+        if contact not in ("segment", "point"):
+            raise ValueError(f"contact={contact!r}")
+        self.contact = contact
+        self.F = 2                                  # fingers present (3 in the adversary's push)
+        self.rv = np.array([self.r, self.r])        # radius of each finger (scaled)
+        self.hold = None                            # scaled depth at which the rotation is held (push phase)
+        self.pusher_fails = False                   # whether finger 2 sliding everywhere is a SLIP_FAILURE
+        self._curve = None
+        if placement is None:
+            pos = {int(v): k for k, v in enumerate(self.bnd)}
+            self.grip = (pos[int(grip[0])], pos[int(grip[1])])
+            i, j = self.grip
+            self.C0 = np.array([self.P[i] + self.r * self.normals[i], self.P[j] + self.r * self.normals[j]])
+            u = self.P[i] - self.P[j]
+            self.u = u / np.linalg.norm(u)
+        else:
+            # continuous placement (docs/planning.md, "Continuous placement"): centres at
+            # p(s_i) + r n(s_i) on the periodic chord-length C2 spline of the outer loop, squeeze
+            # direction e = unit(p(s0) - p(s1)) turned by angle, each tip closed in along -e / +e
+            # until it first touches a node (the smaller root of |x - o - t v| = r)
+            s01, ang = placement
+            q, n = self.spline_point(np.asarray(s01, float) / self.L)
+            e = _turn(_unit(q[0] - q[1]), float(ang))
+            o = q + self.r * n
+            t0, k0 = first_touch(self.P, o[0], -e, self.r)
+            t1, k1 = first_touch(self.P, o[1], e, self.r)
+            if not (np.isfinite(t0) and np.isfinite(t1) and k0 != k1 and t0 > -self.r and t1 > -self.r):
+                raise ValueError("placement: a fingertip cannot touch the object")
+            self.C0 = np.array([o[0] - t0 * e, o[1] + t1 * e])
+            if inside_loops(self.P, self.loops, self.C0).any():
+                raise ValueError("placement: a fingertip centre lies inside the object")
+            self.grip = (int(k0), int(k1))
+            self.u = e
+        self.base = self.C0.copy()
+        self.dirn = np.array([[0.0, 0.0], self.u])
         self.model = model
         self.mu = mu
         # rotation schedules: coefficients in d [m] (highest power first); evaluated at d * L
@@ -203,23 +288,58 @@ class Squeeze:
         if self.rot is not None and self.rot.shape[0] != 2:
             raise ValueError("rotation must have shape (2, k)")
 
+    # --------------------------------------------------------------- smooth outer loop
+    def spline(self):
+        """(knots (k+1,), scipy CubicSpline) of the outer loop, scaled units: periodic, C2, by chord length
+        (jaxsqueeze.geometry.boundary.curve's documented definition)."""
+        if self._curve is None:
+            from scipy.interpolate import CubicSpline
+            p = self.P[:self.loops[0]]
+            closed = np.vstack([p, p[:1]])
+            knots = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+            self._curve = (knots, CubicSpline(knots, closed, bc_type="periodic"))
+        return self._curve
+
+    def spline_point(self, s):
+        """Point(s) and outward unit normal(s) at scaled arc length s (periodic)."""
+        knots, cs = self.spline()
+        s = np.mod(s, knots[-1])
+        p, dp = cs(s), cs(s, 1)
+        tan = dp / np.linalg.norm(dp, axis=-1, keepdims=True)
+        return p, np.stack([tan[..., 1], -tan[..., 0]], axis=-1)
+
     def alpha(self, d):
-        """(2,) fingertip rotations [rad] at scaled depth d."""
-        if self.rot is None:
-            return np.zeros(2)
-        return np.array([np.polyval(c, d * self.L) for c in self.rot])
+        """(F,) fingertip rotations [rad] at scaled load d (held at the squeeze depth in the push)."""
+        out = np.zeros(self.F)
+        if self.rot is not None:
+            dd = self.hold if self.hold is not None else d
+            out[:2] = [np.polyval(c, dd * self.L) for c in self.rot]
+        return out
 
     def dalpha(self, d):
-        """(2,) d alpha / d d per scaled depth (rad per L)."""
-        if self.rot is None:
-            return np.zeros(2)
-        return np.array([np.polyval(np.polyder(c), d * self.L) * self.L if len(c) > 1 else 0.0
-                         for c in self.rot])
+        """(F,) d alpha / d load per scaled unit (rad per L); 0 while the rotation is held."""
+        out = np.zeros(self.F)
+        if self.rot is not None and self.hold is None:
+            out[:2] = [np.polyval(np.polyder(c), d * self.L) * self.L if len(c) > 1 else 0.0 for c in self.rot]
+        return out
 
     def centres(self, d):
-        C = self.C0.copy()
-        C[1] = C[1] + d * self.u
-        return C
+        return self.base + d * self.dirn
+
+    def surface_axes(self, U):
+        """(m, 2) inward unit normals of the deformed object (boundary points P + U): minus the
+        normalized sum of the two adjacent deformed edges' outward normals (the point contact's
+        cone axis; jaxsqueeze.geometry.boundary.normals on deformed positions)."""
+        return -loops_normals(self.P + U, self.loops)
+
+    def cone_components(self, st, a, k):
+        """(fn, ft) of contact a (key k) in its cone's frame: the fingertip normal (segment
+        contacts) or the deformed object's inward surface normal (point contacts)."""
+        if self.contact == "segment":
+            return st["fn"][a], st["ft"][a]
+        ax = self.surface_axes(st["U"])[k]
+        f = st["f"][a]
+        return f @ ax, ax[0] * f[1] - ax[1] * f[0]
 
     # --------------------------------------------------------------- one configuration
     def _system(self, keys, cfg):
@@ -250,12 +370,13 @@ class Squeeze:
         sgn = np.array([1.0 if cfg[k].mode == 2 else -1.0 for k in keys])
         mu = 0.0 if self.model == "frictionless" else self.mu
         Pk = self.P[keys]
+        rk = self.rv[fing]                  # radius of each contact's finger
         lu = np.linalg.inv(M)      # small (2s + 3); fine for an oracle
         sl = np.flatnonzero(slip)
 
         def forces(th):
             e = np.c_[np.cos(th + al), np.sin(th + al)]
-            dvec = C[fing] + self.r * e - Pk
+            dvec = C[fing] + rk[:, None] * e - Pk
             z = lu @ np.r_[dvec.ravel(), np.zeros(3)]
             return z[:2 * s].reshape(s, 2), z[2 * s:], e
 
@@ -274,7 +395,7 @@ class Squeeze:
             # Jacobian: dR_k/dtheta_j
             cols = np.zeros((2 * s + 3, len(sl)))
             for a, k in enumerate(sl):
-                cols[2 * k:2 * k + 2, a] = self.r * t[k]
+                cols[2 * k:2 * k + 2, a] = rk[k] * t[k]
             dF = (lu @ cols)[:2 * s].reshape(s, 2, len(sl))
             w = t + (sgn * mu)[:, None] * e
             J = np.einsum("kc,kca->ka", w, dF)[sl]
@@ -292,7 +413,7 @@ class Squeeze:
         if len(sl):
             cols = np.zeros((2 * s + 3, len(sl)))
             for a, k in enumerate(sl):
-                cols[2 * k:2 * k + 2, a] = self.r * t[k]
+                cols[2 * k:2 * k + 2, a] = rk[k] * t[k]
             dF = (lu @ cols)[:2 * s].reshape(s, 2, len(sl))
             w = t + (sgn * mu)[:, None] * e
             J = np.einsum("kc,kca->ka", w, dF)[sl]
@@ -301,9 +422,8 @@ class Squeeze:
             # its tip (r t alpha'), and the cone's own turn through n, t (same term as J's diagonal)
             rd = np.zeros(2 * s + 3)
             for k in range(s):
-                if fing[k] == 1:
-                    rd[2 * k:2 * k + 2] = self.u
-                rd[2 * k:2 * k + 2] += self.r * t[k] * dal[k]
+                rd[2 * k:2 * k + 2] = self.dirn[fing[k]]
+                rd[2 * k:2 * k + 2] += rk[k] * t[k] * dal[k]
             dFd = (lu @ rd)[:2 * s].reshape(s, 2)
             Rd = (np.sum(w * dFd, 1) + (-fn + sgn * mu * ft) * dal)[sl]
             rate[sl] = -np.linalg.solve(J, Rd)
@@ -316,17 +436,19 @@ class Squeeze:
         """Events whose condition holds in solution ``st`` of ``cfg``: list of (kind, pos, finger, value)."""
         out = []
         X = self.P + st["U"]
-        for f in (0, 1):
-            gap = np.linalg.norm(X - st["C"][f], axis=1) - self.r
-            for k in np.flatnonzero(gap < -gap_tol):
-                if int(k) not in cfg:
-                    out.append(("A", int(k), f, gap[k]))
+        if self.contact == "segment":           # point contacts: no event A
+            for f in range(self.F):
+                gap = np.linalg.norm(X - st["C"][f], axis=1) - self.rv[f]
+                for k in np.flatnonzero(gap < -gap_tol):
+                    if int(k) not in cfg:
+                        out.append(("A", int(k), f, gap[k]))
         for a, k in enumerate(st["keys"]):
             c = cfg[k]
             if st["fn"][a] < -ftol:
                 out.append(("B", k, c.finger, st["fn"][a]))
             if self.model == "coulomb" and c.mode == 1:
-                marg = cone_margin(st["fn"][a], st["ft"][a], self.mu)
+                fn, ft = self.cone_components(st, a, k)
+                marg = cone_margin(fn, ft, self.mu)
                 if marg < -ftol:
                     out.append(("C", k, c.finger, marg))
             if self.model == "coulomb" and c.mode >= 2 and c.armed:
@@ -338,7 +460,8 @@ class Squeeze:
 
 def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, friction, depth,
                    model="coulomb", normals=None, step=None, depth_tol=1e-12, gap_tol=1e-9,
-                   probe=1e-6, max_events=500, rotation=None):
+                   probe=1e-6, max_events=500, rotation=None, contact="segment", placement=None,
+                   adversary=None, loops=None, pusher_fails=False, convert_grip=False):
     """Simulate a squeeze (see the module docstring) and return an :class:`OracleResult`.
 
     Args:
@@ -355,14 +478,39 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
         probe: extra squeeze (relative to L) at which a new contact's stick hypothesis is tested.
         rotation: None or (2, k) polynomial coefficients of alpha_0(d), alpha_1(d) [rad], d in
             metres, highest power first (the library's ``Fingers.rotation``).
+        contact: "segment" (event A: contact regions grow) or "point" (one contact per finger,
+            no event A; the stick test, event C, uses the cone about the deformed object's
+            inward surface normal at the node; sliding (eq. 6) and B stay about the fingertip
+            normal).
+        placement: None or (s (2,) [m], angle [rad]): a continuous placement (docs/planning.md);
+            ``grip`` is then ignored (pass None).
+        adversary: None or dict(s=[m], push=[m], angle=0.0, radius=None, step=None): after a
+            successful squeeze a third fingertip pushes (docs/planning.md, "The adversary push").
+            The pusher's s refers to the outer loop's spline (as a Placement's).
+        convert_grip: with an adversary and an integer grip, squeeze from the placement at the grip
+            nodes' arc lengths (the Adversary docstring: "a grip is converted to one"; fingertip
+            centres on the spline normals) instead of from the grip (centres on the loop normals,
+            as a plain squeeze). The library keeps the grip's geometry (its squeeze phase equals
+            the plain squeeze to 1e-12; the placement's differs by ~1e-5 of the force on the
+            refined square, whose spline normals are ~1e-6 rad off the loop normals), so the
+            default is False.
+        loops: the mesh's boundary loop sizes (default: one loop).
+        pusher_fails: whether the pusher (finger 2) sliding at all its contacts counts as a
+            SLIP_FAILURE of the push (default False: only the grasping fingers 0, 1 fail).
     """
     if np.isinf(friction):
         model = "stick"
     if friction == 0 and model == "coulomb":
         model = "frictionless"
-    sq = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals, rotation)
+    if adversary is not None and placement is None and convert_grip:
+        # "a scene with an adversary is placed by arc length (a grip is converted to one)"
+        tmp = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals, rotation,
+                      contact, None, loops)
+        knots, _ = tmp.spline()
+        placement = (knots[list(tmp.grip)] * tmp.L, 0.0)
+    sq = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals, rotation, contact,
+                 placement, loops)
     L = sq.L
-    Fs = E * thickness * L
     D = depth / L
     h = (step / L) if step is not None else D / 50
     ftol, rtol = 1e-14, 1e-10
@@ -373,7 +521,6 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
         v = sq.P[k] - sq.C0[f]
         mode = 2 if model == "frictionless" else 1
         cfg[k] = Contact(f, mode, float(np.arctan2(v[1], v[0]) - sq.alpha(0.0)[f]))
-    events = []
     d = 0.0
     st = sq.solve(cfg, d)
     status = "SUCCESS"
@@ -385,6 +532,93 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
     # push), so a grip on its cone edge may leave the cone after a few nm, at a depth the probe
     # cannot resolve: the grip starts sticking and event C locates the exit by bisection
     # (fuzz seed 1 #51: grip within CONE_SLACK of the edge, C at 1e-7 rad / alpha' = 4.2e-9 m)
+    cfg, st, status, d, events, rows = _run(sq, cfg, st, status, 0.0, D, h, depth_tol, gap_tol, probe, ftol, rtol,
+                                            max_events)
+    res = _result(sq, cfg, st, status, d, events, E, thickness)
+    res.squeeze_status = status
+    res.squeeze_events = len(events)
+    res.final_push = 0.0
+    if adversary is None:
+        return res
+    res.push_status = None
+    if status != "SUCCESS":
+        return res
+    # ------------------------------------------------------------------ the adversary's push
+    adv = dict(angle=0.0, radius=None, step=None)
+    adv.update(adversary)
+    r3 = (adv["radius"] if adv["radius"] is not None else radius) / L
+    P3 = adv["push"] / L
+    h3 = adv["step"] / L if adv["step"] is not None else min(P3 / 50, r3)
+    knots, _ = sq.spline()
+    s3 = adv["s"] / L
+    q, n = sq.spline_point(s3)
+    # the material point at arc length s on the squeezed object: node displacements interpolated
+    # along the span that holds it; the spline normal turned as that span's chord turned
+    sm = np.mod(s3, knots[-1])
+    i = int(np.clip(np.searchsorted(knots, sm, side="right") - 1, 0, len(knots) - 2))
+    j = (i + 1) % (len(knots) - 1)
+    w = (sm - knots[i]) / (knots[i + 1] - knots[i])
+    U = st["U"]
+    q = q + (1 - w) * U[i] + w * U[j]
+    chord0 = sq.P[j] - sq.P[i]
+    chord = chord0 + U[j] - U[i]
+    nd = _turn(n, np.arctan2(chord0[0] * chord[1] - chord0[1] * chord[0], chord0 @ chord))
+    v = -_turn(nd, adv["angle"])
+    o = q + r3 * nd
+    X = sq.P + U
+    t, k3 = first_touch(X, o, v, r3)
+    touches = np.isfinite(t) and t > -r3
+    c3 = o + (t if touches else 0.0) * v
+    held = sq.centres(d)
+    clear = np.all(np.linalg.norm(held - c3, axis=1) > sq.rv + r3)
+    touches = touches and clear and not inside_loops(X, sq.loops, c3)[0]
+    res.pusher_start = c3 * L
+    res.pusher_node = int(sq.bnd[k3])
+    if not touches:
+        res.status = "INFEASIBLE_GRIP"
+        return res
+    sq.hold = d
+    sq.base = np.vstack([held, c3])
+    sq.dirn = np.vstack([np.zeros((2, 2)), v])
+    sq.rv = np.r_[sq.rv, r3]
+    sq.F = 3
+    sq.pusher_fails = pusher_fails
+    st = sq.solve(cfg, 0.0)
+    cfg, st, status, lam, ev2, rows2 = _run(sq, cfg, st, "SUCCESS", 0.0, P3, h3, depth_tol, gap_tol, probe, ftol,
+                                            rtol, max_events)
+    out = _result(sq, cfg, st, status, d, events + ev2, E, thickness)
+    out.squeeze_status, out.squeeze_events, out.final_push = res.squeeze_status, len(events), lam * L
+    out.squeeze_result = res
+    out.pusher_start, out.pusher_node, out.push_dir = res.pusher_start, res.pusher_node, v
+    # qualities from the recorded rows (trapezoid rule, plan/quality.py): the pusher waits at its
+    # start (force 0) in the squeeze's last row; rows of the push at every step and event
+    Fs = E * thickness * L
+    tot = [np.vstack([res.total_force, np.zeros((1, 2))])] + [r["tot"] * Fs for r in rows2]
+    x2 = [c3 * L] + [r["C"][2] * L for r in rows2]
+    tot, x2 = np.array(tot), np.array(x2)
+    dx = np.diff(x2, axis=0)
+    out.adversary_work = float(np.sum(0.5 * (tot[1:, 2] + tot[:-1, 2]) * dx))
+    dF = tot[:, :2] - tot[0, :2]
+    out.finger_work = np.array([-np.sum(0.5 * (dF[1:, i] + dF[:-1, i]) * dx) for i in (0, 1)])
+    out.failure_push = lam * L
+    out.push_rows = np.array([r["d"] * L for r in rows2])
+    return out
+
+
+def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, max_events):
+    """One loading phase from load d to D (scaled): steps, event location by bisection, events
+    applied, new contacts' hypotheses, D at an event depth. Returns (cfg, st, status, d, events,
+    rows), rows a list of dict(d, tot (F, 2) scaled finger totals, C) at every step and event."""
+    L = sq.L
+    model = sq.model
+    events, rows = [], []
+
+    def record(d, st):
+        tot = np.zeros((sq.F, 2))
+        for a, k in enumerate(st["keys"]):
+            tot[cfg[k].finger] += st["f"][a]
+        rows.append(dict(d=d, tot=tot, C=st["C"].copy()))
+
     guard = 0
     while status == "SUCCESS" and d < D * (1 - 1e-14):
         d1 = min(d + h, D)
@@ -395,6 +629,7 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
             d, st = d1, st1
             _arm(cfg, st, rtol)
             _update_angles(cfg, st)
+            record(d, st)
             continue
         lo, hi = d, d1
         st_hi = st1
@@ -420,7 +655,9 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
                 del cfg[k]
             elif kind == "C":
                 a = st_hi["keys"].index(k)
-                cfg[k].mode = 2 if st_hi["ft"][a] < 0 else 3
+                # the side of the cone the force leaves through (point contacts: the surface cone)
+                ft = sq.cone_components(st_hi, a, k)[1]
+                cfg[k].mode = 2 if ft < 0 else 3
                 cfg[k].armed = False
             elif kind == "D":
                 cfg[k].mode = 1
@@ -448,10 +685,11 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
                 c.angle = float(st["theta"][a])
                 st = sq.solve(cfg, d)
                 status = _failure(sq, cfg)
+        record(d, st)
         guard += 1
         if guard > max_events:
             status = "EVENT_OVERFLOW"
-    return _result(sq, cfg, st, status, d, events, E, thickness)
+    return cfg, st, status, d, events, rows
 
 
 def _fscale(st):
@@ -477,17 +715,22 @@ def _hypothesis(sq, cfg, new, d, probe, ftol):
     """New contacts start sticking. Their force grows from zero: a force rate (the difference of
     the forces at d + probe and d + 2 probe, which drops the tiny push of the gap_tol
     penetration the contact was found at) outside the cone turns the node into a slider on
-    the edge it leaves through (frictionless contacts: labelled by their angle rate)."""
+    the edge it leaves through (frictionless contacts: labelled by their angle rate). The cone
+    is the fingertip's (segment contacts) or the deformed surface's (point contacts)."""
     if new:
         st1 = sq.solve(cfg, d + probe)
         st2 = sq.solve(cfg, d + 2 * probe)
+        ax_s = sq.surface_axes(st1["U"]) if sq.contact == "point" else None
         for a, k in enumerate(st1["keys"]):
             if k not in new:
                 continue
             c = cfg[k]
             # the force difference, resolved in st1's frame (the cone turns with the tip)
             df = st2["f"][a] - st1["f"][a]
-            w1 = st1["theta"][a] + st1["alpha"][c.finger]
+            if ax_s is None:
+                w1 = st1["theta"][a] + st1["alpha"][c.finger]
+            else:
+                w1 = np.arctan2(ax_s[k, 1], ax_s[k, 0])
             dfn = df[0] * np.cos(w1) + df[1] * np.sin(w1)
             dft = -df[0] * np.sin(w1) + df[1] * np.cos(w1)
             if sq.model == "coulomb" and c.mode == 1:
@@ -510,6 +753,10 @@ def _failure(sq, cfg):
             return "LOST_CONTACT"
         if sq.model == "coulomb" and all(c.mode >= 2 for c in mine):
             return "SLIP_FAILURE"
+    if sq.F == 3 and sq.pusher_fails and sq.model == "coulomb":
+        mine = [c for c in cfg.values() if c.finger == 2]
+        if mine and all(c.mode >= 2 for c in mine):
+            return "SLIP_FAILURE"
     return "SUCCESS"
 
 
@@ -525,14 +772,15 @@ def _result(sq, cfg, st, status, d, events, E, h):
         modes[k] = cfg[k].mode
         finger[k] = cfg[k].finger
         theta[k] = st["theta"][a]
-    tot = np.array([F[finger == f].sum(0) for f in (0, 1)])
+    tot = np.array([F[finger == f].sum(0) for f in range(sq.F)])
     return OracleResult(status=status, final_depth=d * L, forces=F, modes=modes, finger=finger, theta=theta,
                         boundary_displacement=st["U"] * L, events=events, total_force=tot, g=st["g"],
-                        centres=st["C"] * L, nodes=sq.bnd.copy(), alpha=st["alpha"])
+                        centres=st["C"] * L, nodes=sq.bnd.copy(), alpha=st["alpha"], grip=tuple(int(sq.bnd[k]) for k in sq.grip))
 
 
 def from_mesh(mesh, E, nu, thickness, radius, grip, friction, depth, **kw):
     """:func:`squeeze_oracle` on a jaxsqueeze ``Mesh`` (points, triangles, boundary loop)."""
+    kw.setdefault("loops", tuple(int(v) for v in getattr(mesh, "loops", (len(mesh.boundary),))))
     return squeeze_oracle(np.asarray(mesh.points), np.asarray(mesh.triangles), np.asarray(mesh.boundary),
                           E, nu, thickness, radius, grip, friction, depth, **kw)
 
@@ -560,7 +808,7 @@ def invariants(res: OracleResult, boundary_points, radius, mu, model="coulomb"):
         torque_balance=abs(np.sum(P0[:, 0] * F[:, 1] - P0[:, 1] * F[:, 0])) / (sc * L),
         off_circle=np.abs(dist[on] - radius).max(initial=0) / L,
         min_free_gap=min(np.min(np.linalg.norm(X[~on] - res.centres[f], axis=1) - radius, initial=np.inf)
-                         for f in (0, 1)) / L,
+                         for f in range(len(res.centres))) / L,
         pull=max(-fn[on].min(initial=0), 0) / sc)
     if model == "coulomb":
         out["stick_outside_cone"] = max(np.max(np.abs(ft[stick]) - mu * fn[stick], initial=0), 0) / sc

@@ -498,7 +498,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     stuck = stuck & ~peeled
     # a release that drops a tangential force (full stick: a fingertip that turns drags its
     # contacts until one pulls) can land a node inside a fingertip: no contact set is consistent
-    sunk = jnp.any((ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol))
+    # (point contacts let the other nodes sink by design)
+    sunk = jnp.any((ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol)) if model.cfg.contact == "segment" \
+        else jnp.array(False)
     return (mode, ns.finger, theta, jnp.any(mode != ns.mode), sunk, peeled | stuck,
             jnp.where(stuck, 3, 1).astype(jnp.int32))
 

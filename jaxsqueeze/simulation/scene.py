@@ -102,8 +102,10 @@ class Adversary:
     touches, then moves by the push. Only a squeeze that succeeded is pushed. A pusher that
     cannot touch the object there from outside (its path misses the object or reaches it
     through the object, as at cos angle ≤ 0, or it would overlap a grasping fingertip) pushes
-    nothing: the result's status is ``INFEASIBLE_GRIP`` and ``squeeze_status`` the squeeze's. Needs a continuous :class:`Placement`'s curve, so a
-    scene with an adversary is placed by arc length (a grip is converted to one).
+    nothing: the result's status is ``INFEASIBLE_GRIP`` and ``squeeze_status`` the squeeze's.
+    The pusher is placed on the smooth boundary curve of a :class:`Placement`; the squeeze
+    itself keeps the scene's grip (or placement), so its rows are those of the same scene
+    without an adversary.
     """
 
     s: Any

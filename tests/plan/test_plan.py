@@ -368,6 +368,11 @@ def test_a_push_that_reverses_a_slip_sticks_the_node_where_the_push_starts(squar
     assert pushed[0][0] == "A" and pushed[1] == ("D", pushed[0][1]) and pushed[0][1] < 1e-9   # the pusher touches
     assert sliding_against_friction(res).size == 0
     check_states(res, sc.mesh, 0.25)
+    # the squeeze rows are those of the scene without the adversary (the grip stays a grip)
+    plain = jsq.squeeze(sc.replace(adversary=None))
+    n = int(plain.count)
+    assert np.all(np.asarray(res.push)[:n] == 0) and np.asarray(res.push)[n] > 0
+    np.testing.assert_allclose(np.asarray(res.forces)[:n], plain.forces, rtol=0, atol=1e-12 * np.abs(plain.forces).max())
 
 
 def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):

@@ -7,12 +7,16 @@ outcome, final depth, per-node contact forces (1e-6 of the largest), contact nod
 stick/slip modes, and the same event sequence (kind, node, finger) at the same depths (1e-6 L;
 they agree to ~1e-12 L). With turning fingertips (``rotation``) the oracle puts a node at world
 angle theta + alpha_f(d): a sticking node keeps its finger-frame angle theta, and D watches the
-slip relative to the tip; the finger-frame angles (``res.theta``) must agree too. Meshes stay below ~150 nodes so that the module runs in seconds.
+slip relative to the tip; the finger-frame angles (``res.theta``) must agree too. Point contacts
+(``contact="point"``: no event A, the cone about the deformed surface normal) and the adversary
+push (a third tip after the squeeze, with its qualities) are compared the same way. Meshes stay
+below ~200 nodes and share one compiled program per feature, so that the module runs in seconds.
 """
 import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
+from jaxsqueeze.plan import quality
 from physics import sliding_against_friction, symmetric_square
 from squeeze_oracle import from_mesh
 
@@ -27,6 +31,9 @@ def _meshes():
         "square": jsq.shapes.rectangle(0.1, 0.1, max_edge=0.025, refine_near=[list(p) for p in SLANTED],
                                        refine_edge=0.003, refine_radius=0.003),
         "symmetric": symmetric_square(0.1, 0.01),       # 141 nodes, mirror-symmetric
+        # 172 nodes, 2.5 mm edges at the slanted grip points
+        "disk": jsq.shapes.disk(0.05, max_edge=0.02, refine_near=[list(p) for p in SLANTED], refine_edge=0.0025,
+                                refine_radius=0.005),
     }
 
 
@@ -97,15 +104,14 @@ def test_squeeze_matches_the_oracle(meshes, name):
     assert max((abs(a[2] - b[2]) for a, b in zip(ev_l, ev_o)), default=0.0) <= 1e-6 * L
 
 
-def test_slip_reversal_at_a_new_contact_gives_event_d():
+def test_slip_reversal_at_a_new_contact_gives_event_d(meshes):
     """Disk R = 50 mm, fingertips r = 40 mm, mu = 0.15. When node 11 joins finger 0 at
     d = 3.798 mm, its neighbour node 12, sliding toward smaller polar angles (mode 3), must
     stop: its slip rate reverses (toward larger angles, against its friction), so it sticks
     there (event D at the depth of the A). The engine once let it slide on, its angle growing
     while its friction pushed it the same way, until d = 7.22 mm, and ended with forces 1.4e-5
     off the oracle's (ADVANCE only sees rates that change sign within a step)."""
-    pts = [list(p) for p in SLANTED]
-    mesh = jsq.shapes.disk(0.05, max_edge=0.02, refine_near=pts, refine_edge=0.0025, refine_radius=0.005)
+    mesh = meshes["disk"]
     grip, mu, radius, depth = (13, 34), 0.15, 0.04, 0.013084016114332804
     scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=NU, thickness=H), fingers=jsq.Fingers(radius=radius),
                       grip=grip, friction=mu, depth=depth)
@@ -186,3 +192,90 @@ def test_a_constant_rotation_offset_changes_nothing_physical(meshes):
     shift = np.angle(np.exp(1j * (np.asarray(b.theta[-1]) - np.asarray(a.theta[-1]) +
                                   np.asarray(c)[np.asarray(a.finger[-1])])))[on]
     assert np.abs(shift).max() <= 1e-9
+
+
+# ----------------------------------------------------------------------------- point contacts and the adversary push
+def _compare_end(res, o, L, nsq_l, kinds):
+    F = np.asarray(res.final_forces)
+    scale = np.abs(o.forces).max()
+    np.testing.assert_allclose(F, o.forces, rtol=0, atol=1e-6 * scale)
+    nf = len(o.total_force)
+    np.testing.assert_allclose(np.asarray(res.finger_forces[-1])[:nf], o.total_force, rtol=0, atol=1e-6 * scale)
+    mode, finger = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
+    on = mode > 0
+    assert np.array_equal(on, o.modes > 0), "contact sets differ"
+    assert np.array_equal(finger[on], o.finger[on]), "contact fingers differ"
+    assert np.array_equal(mode, o.modes), "stick/slip modes differ"
+    ev_l = [(k, n, d, f) for d, n, k, f in res.events.rows()]
+    ev_o = [(e.kind, e.node, e.depth, e.finger) for e in o.events]
+    assert nsq_l == o.squeeze_events
+    ev_l = _canonical(ev_l[:nsq_l], L) + _canonical(ev_l[nsq_l:], L)
+    ev_o = _canonical(ev_o[:nsq_l], L) + _canonical(ev_o[nsq_l:], L)
+    assert [(k, n, f) for k, n, _, f in ev_l] == [(k, n, f) for k, n, _, f in ev_o]
+    assert max((abs(a[2] - b[2]) for a, b in zip(ev_l, ev_o)), default=0.0) <= 1e-6 * L
+    assert "".join(k for k, *_ in ev_o) == kinds
+
+
+# (grip, mu, radius, depth, outcome, final depth [m] or None (= depth), event kinds)
+POINT = {
+    # the slanted grip of test_oracle.py: the surface cones turn toward the grip segment, no event
+    "slanted mu=0.3 holds": ((7, 27), 0.3, 0.02, 0.015, "SUCCESS", "" ),
+    # corner-side grip, mu just above the initial misalignment: the cone of finger 0's contact turns
+    # away and its edge reaches the force at 0.481 mm (C, then SLIP_FAILURE)
+    "grip (28, 6) mu=0.0843 fails by C": ((28, 6), 0.08431295773232896, 0.02, 0.01417, "SLIP_FAILURE", "C"),
+    # on the refined disk other nodes have sunk into the tips (as point contacts allow) when C
+    # fires: a guard for segment contacts once read that as STALLED
+    "disk grip (26, 4) mu=0.1365 fails by C with sunk nodes": ((26, 4), 0.1365, 0.02, 0.0143, "SLIP_FAILURE", "C"),
+}
+
+
+@pytest.mark.parametrize("name", list(POINT))
+def test_point_contacts_match_the_oracle(meshes, name):
+    grip, mu, radius, depth, outcome, kinds = POINT[name]
+    square = meshes["disk" if name.startswith("disk") else "square"]
+    scene = jsq.Scene(mesh=square, material=jsq.Material(E=E, nu=NU, thickness=H), fingers=jsq.Fingers(radius=radius),
+                      grip=grip, friction=mu, depth=depth, contact="point")
+    res = jsq.squeeze(scene)
+    # the oracle's event checks every depth / 10 (bisection locates each event to 1e-12 L)
+    o = from_mesh(square, E, NU, H, radius, grip, mu, depth, contact="point", step=depth / 10)
+    L = float(np.ptp(square.points, axis=0).max())
+    assert res.outcome.name == o.status == outcome
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
+    assert (o.final_depth < depth) == (outcome != "SUCCESS")
+    _compare_end(res, o, L, len(res.events.rows()), kinds)
+    # one contact per finger, nodes free to sink into the tips (no event A)
+    assert np.count_nonzero(o.modes) == 2
+
+
+# (mu, s [m], push [m], angle, outcome, push events' kinds); grip (7, 27), r = 20 mm, depth 10 mm
+PUSH = {
+    "mu=0.5 push 3 mm along the normal (A only)": (0.5, 0.0513, 0.003, 0.0, "SUCCESS", "AAAAAAAA" + "AA"),
+    "mu=0.15 oblique push (A, C, D; SLIP_FAILURE at 2.26 mm)":
+        (0.15, 0.0513, 0.003, 0.5, "SLIP_FAILURE", "AAAACCAAADDADDA" + "CCCCCC"),
+}
+
+
+@pytest.mark.parametrize("name", list(PUSH))
+def test_adversary_push_matches_the_oracle(meshes, name):
+    mu, s, push, angle, outcome, kinds = PUSH[name]
+    square = meshes["square"]
+    grip, radius, depth = (7, 27), 0.02, 0.01
+    adv = dict(s=s, push=push, angle=angle)
+    scene = jsq.Scene(mesh=square, material=jsq.Material(E=E, nu=NU, thickness=H), fingers=jsq.Fingers(radius=radius),
+                      grip=grip, friction=mu, depth=depth, adversary=jsq.Adversary(**adv))
+    res = jsq.squeeze(scene)
+    # squeeze phase checked every depth / 10; the push at the library's default step (push / 50:
+    # the qualities are trapezoid sums over the recorded rows)
+    o = from_mesh(square, E, NU, H, radius, grip, mu, depth, adversary=adv, step=depth / 10)
+    L = float(np.ptp(square.points, axis=0).max())
+    assert res.outcome.name == o.status == outcome
+    assert jsq.Status(int(res.squeeze_status)).name == o.squeeze_status == "SUCCESS"
+    assert abs(float(res.final_depth) - depth) <= 1e-12
+    assert abs(float(quality.failure_push(res)) - o.failure_push) <= 1e-9 * L
+    assert (o.failure_push < push) == (outcome != "SUCCESS")
+    np.testing.assert_allclose(np.asarray(res.centres[0])[2], o.pusher_start, rtol=0, atol=1e-9 * L)
+    _compare_end(res, o, L, int(res.squeeze_events), kinds)
+    W = o.adversary_work
+    assert abs(float(quality.adversary_work(res)) - W) <= 1e-6 * abs(W)
+    np.testing.assert_allclose(np.asarray(quality.finger_work(res)), o.finger_work, rtol=0, atol=1e-6 * abs(W))
+    np.testing.assert_allclose(np.asarray(res.push_work), [W, *o.finger_work], rtol=0, atol=1e-6 * abs(W))
