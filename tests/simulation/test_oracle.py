@@ -64,6 +64,39 @@ def _canonical(events, L, tie=1e-9):
     return out + sorted(group, key=lambda x: (x[0], x[1]))
 
 
+def _agree(res, o, L, kinds, modes=True):
+    """Assert that the library's end state and event log equal the oracle's: per-node and
+    per-finger forces (1e-6 of the largest), contact set, fingers, modes (``modes=False``: only
+    that every contact slides, the frictionless label), finger-frame angles, and the events
+    (kind, node, finger) with their depths (1e-6 L), squeeze and push phase each in order with
+    ties at one depth sorted. ``kinds``: the oracle's event kinds, a set or the exact string."""
+    F = np.asarray(res.final_forces)
+    scale = np.abs(o.forces).max()
+    np.testing.assert_allclose(F, o.forces, rtol=0, atol=1e-6 * scale)
+    nf = len(o.total_force)
+    np.testing.assert_allclose(np.asarray(res.finger_forces[-1])[:nf], o.total_force, rtol=0, atol=1e-6 * scale)
+    mode, finger = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
+    on = mode > 0
+    assert np.array_equal(on, o.modes > 0), "contact sets differ"
+    assert np.array_equal(finger[on], o.finger[on]), "contact fingers differ"
+    if modes:
+        assert np.array_equal(mode, o.modes), "stick/slip modes differ"
+    else:
+        assert np.all(mode[on] >= 2)
+    dth = np.angle(np.exp(1j * (np.asarray(res.theta[-1]) - o.theta)))[on]    # finger frame, modulo 2 pi
+    assert np.abs(dth).max(initial=0) <= 1e-6
+    k = int(res.squeeze_events)
+    assert k == o.squeeze_events
+    ev_l = [(kind, n, d, f) for d, n, kind, f in res.events.rows()]
+    ev_o = [(e.kind, e.node, e.depth, e.finger) for e in o.events]
+    ev_l = _canonical(ev_l[:k], L) + _canonical(ev_l[k:], L)
+    ev_o = _canonical(ev_o[:k], L) + _canonical(ev_o[k:], L)
+    assert [(kind, n, f) for kind, n, _, f in ev_l] == [(kind, n, f) for kind, n, _, f in ev_o]
+    assert max((abs(a[2] - b[2]) for a, b in zip(ev_l, ev_o)), default=0.0) <= 1e-6 * L
+    got = "".join(kind for kind, *_ in ev_o)
+    assert (set(got) == kinds) if isinstance(kinds, set) else (got == kinds)
+
+
 @pytest.mark.parametrize("name", list(CASES))
 def test_squeeze_matches_the_oracle(meshes, name):
     key, pts, model, mu, radius, depth, kinds = CASES[name]
@@ -79,29 +112,7 @@ def test_squeeze_matches_the_oracle(meshes, name):
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     assert np.array_equal(np.asarray(res.nodes), o.nodes)
 
-    # forces: every node and each finger's total
-    F = np.asarray(res.final_forces)
-    scale = np.abs(o.forces).max()
-    np.testing.assert_allclose(F, o.forces, rtol=0, atol=1e-6 * scale)
-    np.testing.assert_allclose(np.asarray(res.total_force[-1]), o.total_force, rtol=0, atol=1e-6 * scale)
-
-    # contact nodes, their fingers and stick/slip modes (frictionless: every contact slides and
-    # the library labels them all 2, so only the set and the fingers are compared)
-    mode, finger = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
-    on = mode > 0
-    assert np.array_equal(on, o.modes > 0), "contact sets differ"
-    assert np.array_equal(finger[on], o.finger[on]), "contact fingers differ"
-    if model == "frictionless":
-        assert np.all(mode[on] >= 2)
-    else:
-        assert np.array_equal(mode, o.modes), "stick/slip modes differ"
-
-    # the event sequence and its depths
-    ev_l = _canonical([(k, n, d, f) for d, n, k, f in res.events.rows()], L)
-    ev_o = _canonical([(e.kind, e.node, e.depth, e.finger) for e in o.events], L)
-    assert [(k, n, f) for k, n, _, f in ev_l] == [(k, n, f) for k, n, _, f in ev_o]
-    assert set(k for k, *_ in ev_o) == set(kinds)
-    assert max((abs(a[2] - b[2]) for a, b in zip(ev_l, ev_o)), default=0.0) <= 1e-6 * L
+    _agree(res, o, L, set(kinds), modes=model != "frictionless")
 
 
 def test_slip_reversal_at_a_new_contact_gives_event_d(meshes):
@@ -155,25 +166,7 @@ def test_rotating_squeeze_matches_the_oracle(meshes, name):
     assert np.array_equal(np.asarray(res.nodes), o.nodes)
     np.testing.assert_allclose(np.asarray(res.alpha[-1])[:2], [np.polyval(c, o.final_depth) for c in rot], atol=1e-12)
 
-    F = np.asarray(res.final_forces)
-    scale = np.abs(o.forces).max()
-    np.testing.assert_allclose(F, o.forces, rtol=0, atol=1e-6 * scale)
-    np.testing.assert_allclose(np.asarray(res.total_force[-1]), o.total_force, rtol=0, atol=1e-6 * scale)
-
-    mode, finger = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
-    on = mode > 0
-    assert np.array_equal(on, o.modes > 0), "contact sets differ"
-    assert np.array_equal(finger[on], o.finger[on]), "contact fingers differ"
-    assert np.array_equal(mode, o.modes), "stick/slip modes differ"
-    # finger-frame polar angles (the library's res.theta) agree modulo 2 pi
-    dth = np.angle(np.exp(1j * (np.asarray(res.theta[-1]) - o.theta)))[on]
-    assert np.abs(dth).max() <= 1e-6
-
-    ev_l = _canonical([(k, n, d, f) for d, n, k, f in res.events.rows()], L)
-    ev_o = _canonical([(e.kind, e.node, e.depth, e.finger) for e in o.events], L)
-    assert [(k, n, f) for k, n, _, f in ev_l] == [(k, n, f) for k, n, _, f in ev_o]
-    assert set(k for k, *_ in ev_o) == set(kinds)
-    assert max((abs(a[2] - b[2]) for a, b in zip(ev_l, ev_o)), default=0.0) <= 1e-6 * L
+    _agree(res, o, L, set(kinds))
 
 
 def test_a_constant_rotation_offset_changes_nothing_physical(meshes):
@@ -195,27 +188,6 @@ def test_a_constant_rotation_offset_changes_nothing_physical(meshes):
 
 
 # ----------------------------------------------------------------------------- point contacts and the adversary push
-def _compare_end(res, o, L, nsq_l, kinds):
-    F = np.asarray(res.final_forces)
-    scale = np.abs(o.forces).max()
-    np.testing.assert_allclose(F, o.forces, rtol=0, atol=1e-6 * scale)
-    nf = len(o.total_force)
-    np.testing.assert_allclose(np.asarray(res.finger_forces[-1])[:nf], o.total_force, rtol=0, atol=1e-6 * scale)
-    mode, finger = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
-    on = mode > 0
-    assert np.array_equal(on, o.modes > 0), "contact sets differ"
-    assert np.array_equal(finger[on], o.finger[on]), "contact fingers differ"
-    assert np.array_equal(mode, o.modes), "stick/slip modes differ"
-    ev_l = [(k, n, d, f) for d, n, k, f in res.events.rows()]
-    ev_o = [(e.kind, e.node, e.depth, e.finger) for e in o.events]
-    assert nsq_l == o.squeeze_events
-    ev_l = _canonical(ev_l[:nsq_l], L) + _canonical(ev_l[nsq_l:], L)
-    ev_o = _canonical(ev_o[:nsq_l], L) + _canonical(ev_o[nsq_l:], L)
-    assert [(k, n, f) for k, n, _, f in ev_l] == [(k, n, f) for k, n, _, f in ev_o]
-    assert max((abs(a[2] - b[2]) for a, b in zip(ev_l, ev_o)), default=0.0) <= 1e-6 * L
-    assert "".join(k for k, *_ in ev_o) == kinds
-
-
 # (grip, mu, radius, depth, outcome, final depth [m] or None (= depth), event kinds)
 POINT = {
     # the slanted grip of test_oracle.py: the surface cones turn toward the grip segment, no event
@@ -242,7 +214,7 @@ def test_point_contacts_match_the_oracle(meshes, name):
     assert res.outcome.name == o.status == outcome
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     assert (o.final_depth < depth) == (outcome != "SUCCESS")
-    _compare_end(res, o, L, len(res.events.rows()), kinds)
+    _agree(res, o, L, kinds)
     # one contact per finger, nodes free to sink into the tips (no event A)
     assert np.count_nonzero(o.modes) == 2
 
@@ -274,7 +246,7 @@ def test_adversary_push_matches_the_oracle(meshes, name):
     assert abs(float(quality.failure_push(res)) - o.failure_push) <= 1e-9 * L
     assert (o.failure_push < push) == (outcome != "SUCCESS")
     np.testing.assert_allclose(np.asarray(res.centres[0])[2], o.pusher_start, rtol=0, atol=1e-9 * L)
-    _compare_end(res, o, L, int(res.squeeze_events), kinds)
+    _agree(res, o, L, kinds)
     W = o.adversary_work
     assert abs(float(quality.adversary_work(res)) - W) <= 1e-6 * abs(W)
     np.testing.assert_allclose(np.asarray(quality.finger_work(res)), o.finger_work, rtol=0, atol=1e-6 * abs(W))
