@@ -386,13 +386,8 @@ class Squeeze:
             ft = np.sum(f * t, 1)
             return (ft + sgn * mu * fn)[sl], fn, ft, t
 
-        ok = True
-        for it in range(iters):
-            f, g, e = forces(th)
-            R, fn, ft, t = resid(f, e)
-            if len(sl) == 0:
-                break
-            # Jacobian: dR_k/dtheta_j
+        def jacobian(e, t, fn, ft):
+            """dR_k/dtheta_j of the sliding nodes (eq. 6 differentiated through the bordered solve)."""
             cols = np.zeros((2 * s + 3, len(sl)))
             for a, k in enumerate(sl):
                 cols[2 * k:2 * k + 2, a] = rk[k] * t[k]
@@ -400,6 +395,15 @@ class Squeeze:
             w = t + (sgn * mu)[:, None] * e
             J = np.einsum("kc,kca->ka", w, dF)[sl]
             J[np.arange(len(sl)), np.arange(len(sl))] += (-fn + sgn * mu * ft)[sl]
+            return J
+
+        ok = True
+        for it in range(iters):
+            f, g, e = forces(th)
+            R, fn, ft, t = resid(f, e)
+            if len(sl) == 0:
+                break
+            J = jacobian(e, t, fn, ft)
             step = np.linalg.solve(J, -R)
             th[sl] += step
             if np.abs(step).max() < tol:
@@ -411,13 +415,8 @@ class Squeeze:
         # angle rates by the implicit function theorem
         rate = np.zeros(s)
         if len(sl):
-            cols = np.zeros((2 * s + 3, len(sl)))
-            for a, k in enumerate(sl):
-                cols[2 * k:2 * k + 2, a] = rk[k] * t[k]
-            dF = (lu @ cols)[:2 * s].reshape(s, 2, len(sl))
+            J = jacobian(e, t, fn, ft)
             w = t + (sgn * mu)[:, None] * e
-            J = np.einsum("kc,kca->ka", w, dF)[sl]
-            J[np.arange(len(sl)), np.arange(len(sl))] += (-fn + sgn * mu * ft)[sl]
             # partial d/dd at fixed local angles: the centre's motion, every node turning with
             # its tip (r t alpha'), and the cone's own turn through n, t (same term as J's diagonal)
             rd = np.zeros(2 * s + 3)
