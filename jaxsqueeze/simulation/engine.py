@@ -452,8 +452,10 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
     contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row). Under Coulomb,
-    an armed sliding contact whose slip rate turned inconsistent at d* sticks there, a D event
-    (an event keeps every force but changes the other contacts' rates).
+    once the new contacts hold, the armed sliding contact whose slip rate is most reversed at
+    d* sticks there, a D event (:func:`_reversed`), one per pass. With segment contacts, a free
+    node found inside a fingertip (a release that dropped a shear force) is ``unsettled``: the
+    check stops the squeeze with STALLED.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
