@@ -252,7 +252,6 @@ class Squeeze:
         self.F = 2                                  # fingers present (3 in the adversary's push)
         self.rv = np.array([self.r, self.r])        # radius of each finger (scaled)
         self.hold = None                            # scaled depth at which the rotation is held (push phase)
-        self.pusher_fails = False                   # whether finger 2 sliding everywhere is a SLIP_FAILURE
         self._curve = None
         if placement is None:
             pos = {int(v): k for k, v in enumerate(self.bnd)}
@@ -460,7 +459,7 @@ class Squeeze:
 def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, friction, depth,
                    model="coulomb", normals=None, step=None, depth_tol=1e-12, gap_tol=1e-9,
                    probe=1e-6, max_events=500, rotation=None, contact="segment", placement=None,
-                   adversary=None, loops=None, pusher_fails=False, convert_grip=False):
+                   adversary=None, loops=None):
     """Simulate a squeeze (see the module docstring) and return an :class:`OracleResult`.
 
     Args:
@@ -486,27 +485,12 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
         adversary: None or dict(s=[m], push=[m], angle=0.0, radius=None, step=None): after a
             successful squeeze a third fingertip pushes (docs/planning.md, "The adversary push").
             The pusher's s refers to the outer loop's spline (as a Placement's).
-        convert_grip: with an adversary and an integer grip, squeeze from the placement at the grip
-            nodes' arc lengths (the Adversary docstring: "a grip is converted to one"; fingertip
-            centres on the spline normals) instead of from the grip (centres on the loop normals,
-            as a plain squeeze). The library keeps the grip's geometry (its squeeze phase equals
-            the plain squeeze to 1e-12; the placement's differs by ~1e-5 of the force on the
-            refined square, whose spline normals are ~1e-6 rad off the loop normals), so the
-            default is False.
         loops: the mesh's boundary loop sizes (default: one loop).
-        pusher_fails: whether the pusher (finger 2) sliding at all its contacts counts as a
-            SLIP_FAILURE of the push (default False: only the grasping fingers 0, 1 fail).
     """
     if np.isinf(friction):
         model = "stick"
     if friction == 0 and model == "coulomb":
         model = "frictionless"
-    if adversary is not None and placement is None and convert_grip:
-        # "a scene with an adversary is placed by arc length (a grip is converted to one)"
-        tmp = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals, rotation,
-                      contact, None, loops)
-        knots, _ = tmp.spline()
-        placement = (knots[list(tmp.grip)] * tmp.L, 0.0)
     sq = Squeeze(points, triangles, boundary, nu, radius, grip, model, friction, normals, rotation, contact,
                  placement, loops)
     L = sq.L
@@ -581,7 +565,6 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
     sq.dirn = np.vstack([np.zeros((2, 2)), v])
     sq.rv = np.r_[sq.rv, r3]
     sq.F = 3
-    sq.pusher_fails = pusher_fails
     st = sq.solve(cfg, 0.0)
     cfg, st, status, lam, ev2, rows2 = _run(sq, cfg, st, "SUCCESS", 0.0, P3, h3, depth_tol, gap_tol, probe, ftol,
                                             rtol, max_events)
@@ -752,10 +735,6 @@ def _failure(sq, cfg):
             return "LOST_CONTACT"
         if sq.model == "coulomb" and all(c.mode >= 2 for c in mine):
             return "SLIP_FAILURE"
-    if sq.F == 3 and sq.pusher_fails and sq.model == "coulomb":
-        mine = [c for c in cfg.values() if c.finger == 2]
-        if mine and all(c.mode >= 2 for c in mine):
-            return "SLIP_FAILURE"
     return "SUCCESS"
 
 
@@ -782,42 +761,3 @@ def from_mesh(mesh, E, nu, thickness, radius, grip, friction, depth, **kw):
     kw.setdefault("loops", tuple(int(v) for v in getattr(mesh, "loops", (len(mesh.boundary),))))
     return squeeze_oracle(np.asarray(mesh.points), np.asarray(mesh.triangles), np.asarray(mesh.boundary),
                           E, nu, thickness, radius, grip, friction, depth, **kw)
-
-
-def invariants(res: OracleResult, boundary_points, radius, mu, model="coulomb"):
-    """Largest violations of the end state's invariants, relative to the largest force (forces)
-    or the object size L (lengths): force and torque balance, contact nodes on their tip circle,
-    free nodes outside both tips (negative = penetration), stick forces inside the cone, slide
-    forces on the edge opposing their mode."""
-    P0 = np.asarray(boundary_points, float)
-    F = res.forces
-    sc = max(np.abs(F).max(), 1e-300)
-    L = float(np.ptp(P0, axis=0).max())
-    X = P0 + res.boundary_displacement
-    on = res.modes > 0
-    C = res.centres[np.where(on, res.finger, 0)]
-    rel = X - C
-    dist = np.linalg.norm(rel, axis=1)
-    nrm = rel / np.maximum(dist, 1e-300)[:, None]
-    fn = np.sum(F * nrm, 1)
-    ft = nrm[:, 0] * F[:, 1] - nrm[:, 1] * F[:, 0]
-    stick, pos, neg = res.modes == 1, res.modes == 2, res.modes == 3
-    out = dict(
-        force_balance=np.abs(F.sum(0)).max() / sc,
-        torque_balance=abs(np.sum(P0[:, 0] * F[:, 1] - P0[:, 1] * F[:, 0])) / (sc * L),
-        off_circle=np.abs(dist[on] - radius).max(initial=0) / L,
-        min_free_gap=min(np.min(np.linalg.norm(X[~on] - res.centres[f], axis=1) - radius, initial=np.inf)
-                         for f in range(len(res.centres))) / L,
-        pull=max(-fn[on].min(initial=0), 0) / sc)
-    if model == "coulomb":
-        out["stick_outside_cone"] = max(np.max(np.abs(ft[stick]) - mu * fn[stick], initial=0), 0) / sc
-        out["slide_off_edge"] = max(np.abs(ft[pos] + mu * fn[pos]).max(initial=0),
-                                    np.abs(ft[neg] - mu * fn[neg]).max(initial=0)) / sc
-    elif model == "frictionless":
-        out["tangential"] = np.abs(ft[on]).max(initial=0) / sc
-    if res.alpha is not None:
-        # theta is the finger-frame angle: world angle = theta + alpha of the node's finger
-        world = np.arctan2(rel[:, 1], rel[:, 0])
-        al = res.alpha[np.where(on, res.finger, 0)]
-        out["theta_frame"] = np.abs(np.angle(np.exp(1j * (world - al - res.theta))))[on].max(initial=0)
-    return out
