@@ -536,16 +536,21 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
     s3 = adv["s"] / L
     q, n = sq.spline_point(s3)
     # the material point at arc length s on the squeezed object: node displacements interpolated
-    # along the span that holds it; the spline normal turned as that span's chord turned
+    # along the span that holds it; the spline normal turned by the outline's rotation there,
+    # interpolated the same way between node rotations (the mean of the two chords' turns at
+    # each outer-loop node)
+    nk = len(knots) - 1
     sm = np.mod(s3, knots[-1])
-    i = int(np.clip(np.searchsorted(knots, sm, side="right") - 1, 0, len(knots) - 2))
-    j = (i + 1) % (len(knots) - 1)
+    i = int(np.clip(np.searchsorted(knots, sm, side="right") - 1, 0, nk - 1))
+    j = (i + 1) % nk
     w = (sm - knots[i]) / (knots[i + 1] - knots[i])
     U = st["U"]
     q = q + (1 - w) * U[i] + w * U[j]
-    chord0 = sq.P[j] - sq.P[i]
-    chord = chord0 + U[j] - U[i]
-    nd = _turn(n, np.arctan2(chord0[0] * chord[1] - chord0[1] * chord[0], chord0 @ chord))
+    c0 = np.roll(sq.P[:nk], -1, axis=0) - sq.P[:nk]                  # chord k: node k -> k + 1
+    c1 = c0 + np.roll(U[:nk], -1, axis=0) - U[:nk]
+    spin = np.arctan2(c0[:, 0] * c1[:, 1] - c0[:, 1] * c1[:, 0], np.sum(c0 * c1, axis=1))
+    at_node = 0.5 * (spin + np.roll(spin, 1))                          # node k: chords k - 1 and k
+    nd = _turn(n, (1 - w) * at_node[i] + w * at_node[j])
     v = -_turn(nd, adv["angle"])
     o = q + r3 * nd
     X = sq.P + U

@@ -245,7 +245,8 @@ def push_model(model: Model, grasp: Grasp, st) -> Model:
     boundary at arc length s and closed in along its push direction (the inward normal turned
     by the angle offset) until it touches the deformed object, pushes by λ along that direction.
     The pushed point is the material point at arc length s on the squeezed object (its node
-    displacements interpolated), and its normal turns as the boundary span there turned."""
+    displacements interpolated), and its normal turns with the outline there (the turns of the
+    boundary spans, interpolated between nodes so that the push is continuous in s)."""
     op, L = model.op, model.L
     dt = op.G.dtype
     s3, angle, radius, push, step = grasp.adversary
@@ -253,16 +254,26 @@ def push_model(model: Model, grasp: Grasp, st) -> Model:
     s3 = jnp.asarray(s3, dt) / L
     q, n = boundary.point(crv, s3)
     # the material point at arc length s3 on the squeezed object: interpolate the outer loop's
-    # node displacements along the span that holds s3; turn the normal as that span turned
+    # node displacements along the span that holds s3. Turn the normal by the boundary's
+    # rotation there, interpolated the same way between its values at the span's two nodes
+    # (each the mean of the turns of the two spans that meet there), so that the push and its
+    # qualities are continuous in s3 across nodes
     k = crv.knots
+    nk = k.shape[0] - 1                      # nodes on the outer loop
     sm = jnp.mod(s3, k[-1])
-    i = jnp.clip(jnp.searchsorted(k, sm, side="right") - 1, 0, k.shape[0] - 2)
-    j = jnp.mod(i + 1, k.shape[0] - 1)
+    i = jnp.clip(jnp.searchsorted(k, sm, side="right") - 1, 0, nk - 1)
+    j = jnp.mod(i + 1, nk)
     w = (sm - k[i]) / (k[i + 1] - k[i])
     q = q + (1 - w) * st.u[i] + w * st.u[j]
-    chord0 = op.points[j] - op.points[i]
-    chord = chord0 + st.u[j] - st.u[i]
-    nd = _turn(n, jnp.arctan2(cross2(chord0, chord), jnp.sum(chord0 * chord)))
+
+    def turned(a):                           # the rotation [rad] of the span from node a to a + 1
+        b = jnp.mod(a + 1, nk)
+        chord0 = op.points[b] - op.points[a]
+        chord = chord0 + st.u[b] - st.u[a]
+        return jnp.arctan2(cross2(chord0, chord), jnp.sum(chord0 * chord))
+
+    before, here, after = turned(jnp.mod(i - 1, nk)), turned(i), turned(j)
+    nd = _turn(n, (1 - w) * 0.5 * (before + here) + w * 0.5 * (here + after))
     v = -_turn(nd, angle)
     # the pusher starts on the boundary point (tangent there, as a placed grasping fingertip)
     r3 = radius / L
