@@ -30,7 +30,7 @@ bordered, operator or linalg modules); it only follows the library's documented 
   the tip).
   Frictionless contacts slide with f.t = 0 (labelled 2 or 3 by the sign of their angle rate).
 * Events: A a free boundary node enters a tip circle (gap < -gap_tol); B a contact's normal
-  force f.n becomes negative; C a sticking force leaves its cone (mu f.n - |f.t| < 0);
+  force f.n becomes negative (n the cone axis: the tip normal, or the surface normal of a point contact); C a sticking force leaves its cone (mu f.n - |f.t| < 0);
   D a sliding node's slip rate s * dtheta/dd becomes negative (s = +1 for mode 2, -1 for 3;
   theta the finger-frame angle, so the rate is the slip relative to the rotating tip),
   (with the documented slack of 1e-7 rad outside the cone, CONE_SLACK),
@@ -442,10 +442,10 @@ class Squeeze:
                         out.append(("A", int(k), f, gap[k]))
         for a, k in enumerate(st["keys"]):
             c = cfg[k]
-            if st["fn"][a] < -ftol:
-                out.append(("B", k, c.finger, st["fn"][a]))
+            fn, ft = self.cone_components(st, a, k)
+            if fn < -ftol:
+                out.append(("B", k, c.finger, fn))
             if self.model == "coulomb" and c.mode == 1:
-                fn, ft = self.cone_components(st, a, k)
                 marg = cone_margin(fn, ft, self.mu)
                 if marg < -ftol:
                     out.append(("C", k, c.finger, marg))
@@ -477,9 +477,10 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
         rotation: None or (2, k) polynomial coefficients of alpha_0(d), alpha_1(d) [rad], d in
             metres, highest power first (the library's ``Fingers.rotation``).
         contact: "segment" (event A: contact regions grow) or "point" (one contact per finger,
-            no event A; the stick test, event C, uses the cone about the deformed object's
-            inward surface normal at the node; sliding (eq. 6) and B stay about the fingertip
-            normal).
+            no event A; the cone is about the deformed object's inward surface normal at the
+            node, so the stick test (C) and the break test (B: the normal force along that axis
+            turns negative, the force leaving the cone through its apex, Section IV-B.2) turn
+            with the surface; a sliding node's force (eq. 6) stays about the fingertip normal).
         placement: None or (s (2,) [m], angle [rad]): a continuous placement (docs/planning.md);
             ``grip`` is then ignored (pass None).
         adversary: None or dict(s=[m], push=[m], angle=0.0, radius=None, step=None): after a

@@ -66,12 +66,13 @@ def _canonical(events, L, tie=1e-9):
 
 def _agree(res, o, L, kinds, modes=True):
     """Assert that the library's end state and event log equal the oracle's: per-node and
-    per-finger forces (1e-6 of the largest), contact set, fingers, modes (``modes=False``: only
+    per-finger forces (1e-6 of the largest the squeeze recorded: after a break that left one
+    finger without contact the end forces are round-off), contact set, fingers, modes (``modes=False``: only
     that every contact slides, the frictionless label), finger-frame angles, and the events
     (kind, node, finger) with their depths (1e-6 L), squeeze and push phase each in order with
     ties at one depth sorted. ``kinds``: the oracle's event kinds, a set or the exact string."""
     F = np.asarray(res.final_forces)
-    scale = np.abs(o.forces).max()
+    scale = max(np.abs(o.forces).max(), np.abs(np.asarray(res.finger_forces)).max())
     np.testing.assert_allclose(F, o.forces, rtol=0, atol=1e-6 * scale)
     nf = len(o.total_force)
     np.testing.assert_allclose(np.asarray(res.finger_forces[-1])[:nf], o.total_force, rtol=0, atol=1e-6 * scale)
@@ -198,6 +199,10 @@ POINT = {
     # on the refined disk other nodes have sunk into the tips (as point contacts allow) when C
     # fires: a guard for segment contacts once read that as STALLED
     "disk grip (26, 4) mu=0.1365 fails by C with sunk nodes": ((26, 4), 0.1365, 0.02, 0.0143, "SLIP_FAILURE", "C"),
+    # full stick, a grip 84 degrees off finger 0's normal (near a corner of the bottom side): the
+    # surface there turns under the squeeze until the force leaves the cone's half-plane through
+    # its apex (B about the surface normal, the cone's axis; about the tip normal it would hold)
+    "stick grip (13, 39) breaks as the surface turns": ((13, 39), np.inf, 0.01, 0.015, "LOST_CONTACT", "B"),
 }
 
 
@@ -205,8 +210,9 @@ POINT = {
 def test_point_contacts_match_the_oracle(meshes, name):
     grip, mu, radius, depth, outcome, kinds = POINT[name]
     square = meshes["disk" if name.startswith("disk") else "square"]
+    model = "stick" if np.isinf(mu) else "coulomb"
     scene = jsq.Scene(mesh=square, material=jsq.Material(E=E, nu=NU, thickness=H), fingers=jsq.Fingers(radius=radius),
-                      grip=grip, friction=mu, depth=depth, contact="point")
+                      grip=grip, friction=0.5 if np.isinf(mu) else mu, friction_model=model, depth=depth, contact="point")
     res = jsq.squeeze(scene)
     # the oracle's event checks every depth / 10 (bisection locates each event to 1e-12 L)
     o = from_mesh(square, E, NU, H, radius, grip, mu, depth, contact="point", step=depth / 10)
@@ -216,7 +222,7 @@ def test_point_contacts_match_the_oracle(meshes, name):
     assert (o.final_depth < depth) == (outcome != "SUCCESS")
     _agree(res, o, L, kinds)
     # one contact per finger, nodes free to sink into the tips (no event A)
-    assert np.count_nonzero(o.modes) == 2
+    assert np.count_nonzero(o.modes) == (1 if outcome == "LOST_CONTACT" else 2)
 
 
 # (mu, s [m], push [m], angle, outcome, push events' kinds); grip (7, 27), r = 20 mm, depth 10 mm
