@@ -147,21 +147,35 @@ def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
     assert "placement" not in views.summary(a, square)["scene"]
 
 
+def _pushed(ellipse, x):
+    """The ellipse placed at x = (s_0, s_1, angle, s_push) and pushed 2 mm by an adversary at
+    arc length s_push after its squeeze: one signature, so that the derivative tests share
+    one compiled forward-mode program (squeeze and push phase)."""
+    return jsq.squeeze(ellipse.replace(placement=plan.Placement(s=x[:2], angle=x[2]),
+                                       adversary=plan.Adversary(s=x[3], push=0.002)))
+
+
 def test_jacfwd_in_placement_matches_central_differences(ellipse):
-    """d(grip force)/d(s_0, s_1, angle) by jax.jacfwd against central differences (step 1e-6 m
-    or rad; agree to rtol 1e-6 away from event switches)."""
+    """d(grip force, adversary work)/d(s_0, s_1, angle, s_push) by jax.jacfwd against central
+    differences (step 1e-6 m or rad; agree to rtol 1e-6 away from event switches): through the
+    squeeze and through the push phase, whose pushed point and normal move continuously with
+    s_push (docs/planning.md, "The adversary push")."""
     P = float(ellipse.curve().perimeter)
-    x0 = np.array([0.01, P / 2 + 0.004, 0.05])
+    x0 = np.array([0.01, P / 2 + 0.004, 0.05, P / 4])
 
     def f(x):
-        return jsq.squeeze(ellipse.replace(placement=plan.Placement(s=x[:2], angle=x[2]))).grip_force
+        res = _pushed(ellipse, x)
+        return jnp.stack([Q.grip_force(res), Q.adversary_work(res)]), res.status
 
-    J = jax.jacfwd(f)(jnp.asarray(x0))
-    for k in range(3):
-        h = np.eye(3)[k] * 1e-6
-        fd = (float(f(x0 + h)) - float(f(x0 - h))) / 2e-6
-        assert abs(fd) > 1e-3
-        np.testing.assert_allclose(J[k], fd, rtol=1e-6)
+    J, status = jax.jacfwd(f, has_aux=True)(jnp.asarray(x0))
+    assert int(status) == jsq.Status.SUCCESS
+    for k in range(4):
+        h = np.eye(4)[k] * 1e-6
+        fd = (np.asarray(f(x0 + h)[0]) - np.asarray(f(x0 - h)[0])) / 2e-6
+        on = [0, 1] if k < 3 else [1]              # the push comes after the grip force's row
+        assert np.all(np.abs(fd[on]) > 1e-6)
+        np.testing.assert_allclose(J[on, k], fd[on], rtol=1e-6)
+    assert float(J[0, 3]) == 0.0
 
 
 def test_derivatives_stay_finite_where_the_grip_never_started(ellipse):
@@ -169,18 +183,20 @@ def test_derivatives_stay_finite_where_the_grip_never_started(ellipse):
     (grip force, slip margin) have derivative 0 there, not NaN, so one infeasible member cannot
     poison a gradient step; the margin's derivative is the one that says where to go (checked
     against central differences: the fingertip normals swing fast between neighbouring
-    placements)."""
-    x0 = jnp.array([0.0, 0.02])
+    placements). No push happens, and the adversary's work is 0 with derivative 0."""
+    x0 = jnp.array([0.0, 0.02, 0.0, 0.05])
 
-    def f(s):
-        res = jsq.squeeze(ellipse.replace(placement=plan.Placement(s=s)))
-        return jnp.stack([Q.grip_force(res), res.grip_force, Q.squeeze_work(res), Q.slip_margin(res, 0.5), res.margin])
+    def f(x):
+        res = _pushed(ellipse, x)
+        return jnp.stack([Q.grip_force(res), res.grip_force, Q.squeeze_work(res), Q.adversary_work(res),
+                          Q.slip_margin(res, 0.5), res.margin])
 
     out, J = f(x0), jax.jacfwd(f)(x0)
     assert float(out[-1]) < 0 and np.all(np.isfinite(J))
-    np.testing.assert_array_equal(J[:3], 0.0)
+    np.testing.assert_array_equal(out[:4], 0.0)
+    np.testing.assert_array_equal(J[:4], 0.0)
     for k in range(2):       # steep (-138 rad/m): a step of 1e-6 m leaves a truncation error of 1.5e-6
-        h = np.eye(2)[k] * 1e-8
+        h = np.eye(4)[k] * 1e-8
         np.testing.assert_allclose(J[-1, k], (float(f(x0 + h)[-1]) - float(f(x0 - h)[-1])) / 2e-8, rtol=1e-6, atol=1e-6)
     assert abs(float(J[-1, 0])) > 100
 
