@@ -150,9 +150,9 @@ class Settings:
         ``None`` (default) chooses: an eager :func:`~jaxsqueeze.squeeze` starts with 32 slots
         (at most the boundary node count) and, when they run out, doubles them and squeezes
         again (a program per capacity, the same result); a traced squeeze (``jit``, ``vmap``,
-        ``jacfwd``) cannot rerun and keeps 64 (the planner squeezes with 32 and redoes what
-        overflows: ``plan.search.quick``). Fewer slots are faster: the bordered inverse is
-        (2·capacity + 3)².
+        ``jacfwd``) cannot rerun and keeps 64, also at most the boundary node count (the
+        planner squeezes with 32 and redoes what overflows: ``plan.search.quick``). Fewer
+        slots are faster: the bordered inverse is (2·capacity + 3)².
     sliding_capacity: sliding contacts in the slip-angle Newton system (static; at most
         ``capacity``). More sliding nodes give ``Status.OVERFLOW``. ``None`` (default): an
         eager Coulomb squeeze starts with 8 and grows them like ``capacity``; a traced one,
@@ -191,11 +191,10 @@ class Settings:
 
     def slots(self, m: int, eager: bool = False) -> int:
         """The contact slots a squeeze of an object with m boundary nodes starts with:
-        ``capacity`` (at most m: no more contacts exist), or under ``None`` min(``EAGER_SLOTS``,
-        m) eagerly and ``TRACED_SLOTS`` traced."""
-        if self.capacity is not None:
-            return min(int(self.capacity), max(2, int(m)))
-        return max(2, min(EAGER_SLOTS, int(m))) if eager else TRACED_SLOTS
+        ``capacity``, or under ``None`` ``EAGER_SLOTS`` eagerly and ``TRACED_SLOTS`` traced;
+        each at most m (no more contacts exist) and at least 2."""
+        n = self.capacity if self.capacity is not None else EAGER_SLOTS if eager else TRACED_SLOTS
+        return max(2, min(int(n), int(m)))
 
     def sliding(self, capacity: int, eager: bool = False) -> int:
         """The size of the one compact Newton system a squeeze with ``capacity`` slots starts

@@ -333,7 +333,11 @@ def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monke
     cfg = grasp_mod.config_of(slanted, eager=True)
     assert (cfg.capacity, cfg.sliding) == (scene_mod.EAGER_SLOTS, scene_mod.EAGER_SLIDING) == (32, 8)
     traced = grasp_mod.config_of(slanted)
-    assert (traced.capacity, traced.sliding) == (scene_mod.TRACED_SLOTS, 0)
+    assert (traced.capacity, traced.sliding) == (scene_mod.TRACED_SLOTS, 0) and len(slanted.boundary_nodes()) > 64
+    # no more slots than boundary nodes, traced or eager (a 20-node outline: 20 slots)
+    small = slanted.replace(mesh=jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02), grip=(4, 14))
+    assert len(small.boundary_nodes()) == 20
+    assert grasp_mod.config_of(small).capacity == grasp_mod.config_of(small, eager=True).capacity == 20
     monkeypatch.setattr(scene_mod, "EAGER_SLOTS", 4)
     monkeypatch.setattr(scene_mod, "EAGER_SLIDING", 1)
     monkeypatch.setattr(grasp_mod, "_GROWN", {})
