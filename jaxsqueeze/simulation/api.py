@@ -178,16 +178,15 @@ def _grow_key(scene: Scene, op: Compliance, cfg: Config):
 
 def _grown(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Config | None:
     """``cfg`` with the automatic capacities that ran out grown to at least twice their size
-    and to what the last row of ``res`` needed (contact slots up to the boundary node count
-    and the memory limit, sliding slots up to the contact slots), or None when they are fixed
-    by the settings or cannot grow. The capacity that ran out is the one the last row fills
-    (that row may already miss the node that found no slot); both when it fills neither."""
+    and to what ``res`` asked for (``res.stats.contacts`` / ``sliding``: the set that
+    overflowed; contact slots up to the boundary node count and the memory limit, sliding
+    slots up to the contact slots), or None when they are fixed by the settings or cannot
+    grow. Both grow when neither count exceeds its slots."""
     s = scene.settings
-    mode = np.asarray(res.modes)[int(res.count) - 1]
-    contacts, sliding = int(np.sum(mode > laws.FREE)), int(np.sum(mode >= laws.SLIP_POS))
+    contacts, sliding = int(res.stats.contacts), int(res.stats.sliding)
     pow2 = lambda k: 1 << max(int(k) - 1, 1).bit_length()  # noqa: E731
-    full_c = contacts >= cfg.capacity
-    full_s = 0 < cfg.sliding <= sliding
+    full_c = contacts > cfg.capacity
+    full_s = 0 < cfg.sliding < sliding
     if not (full_c or full_s):
         full_c = full_s = True
     capacity = cfg.capacity

@@ -74,6 +74,8 @@ class Stats(NamedTuple):
     residual: jax.Array        # largest final Newton update [rad] of an accepted solve
     solves: jax.Array          # configuration solves (loop iterations), all phases
     refreshes: jax.Array       # recomputations of the kept bordered inverse (contacts.update)
+    contacts: jax.Array        # most contact nodes at once, the set that overflowed its slots included
+    sliding: jax.Array         # most sliding contact nodes at once (likewise)
 
 
 class Bracket(NamedTuple):
@@ -123,7 +125,7 @@ class State:
     added: jax.Array        # (m,) bool: contacts made at d_star, to be tested by hypothesis
     checks: jax.Array       # CHECK passes at d_star
     before: jax.Array       # (m,) modes before the event being resolved (stall test)
-    status: jax.Array       # RUNNING or a Status, decided by finish() only
+    status: jax.Array       # RUNNING or a Status, decided by finish() (reconcile() ends an overflow)
     fault: jax.Array        # RUNNING or a structural Status raised by a stage (overflow, stall, ...)
     n_ev: jax.Array
     events: tuple           # depth (E,), node (E,), kind (E,), finger (E,)
@@ -192,7 +194,7 @@ def init(model: Model) -> State:
         events=(z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
         hist=(z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
               z((H, m, 2), dt), z((H, F, 2), dt), z((H, F), dt), z((H, 3), dt), z(H, dt)),
-        count=i32(0), stats=Stats(*(i32(0),) * 5, zero, i32(0), i32(0)), squeeze_status=i32(RUNNING),
+        count=i32(0), stats=Stats(*(i32(0),) * 5, zero, *(i32(0),) * 4), squeeze_status=i32(RUNNING),
         squeeze_events=i32(0),
         margin=model.margin, grip=model.grip, invalid=model.invalid, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt))
 
@@ -231,8 +233,15 @@ def reconcile(model: Model, st: State) -> State:
     if cfg.sliding_limited:
         over = over | (jnp.sum(st.nodes.mode >= SLIP_POS) > cfg.sliding)
     fault = jnp.where(over & (st.fault == RUNNING), Status.OVERFLOW, st.fault).astype(jnp.int32)
-    stats = st.stats._replace(refreshes=st.stats.refreshes + fresh)
-    return _with(st, slots=slots, fault=fault, stats=stats)
+    s = st.stats
+    stats = s._replace(refreshes=s.refreshes + fresh,
+                       contacts=jnp.maximum(s.contacts, jnp.sum(st.nodes.mode > FREE)).astype(jnp.int32),
+                       sliding=jnp.maximum(s.sliding, jnp.sum(st.nodes.mode >= SLIP_POS)).astype(jnp.int32))
+    # the slots cannot hold the new contact set (apply_event or this update found more contacts
+    # or sliding contacts than slots), so no solve of it is right: a running squeeze ends here,
+    # and its last row stays the last one solved with every contact in its slot
+    status = jnp.where((fault == Status.OVERFLOW) & (st.status == RUNNING), fault, st.status).astype(jnp.int32)
+    return _with(st, slots=slots, fault=fault, stats=stats, status=status)
 
 
 def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
@@ -562,7 +571,8 @@ def _record(model: Model, st: State) -> State:
 
 
 def finish(model: Model, st: State, ok) -> State:
-    """Record the row and decide the status: the one place where a status is set.
+    """Record the row and decide the status (an overflow, which records nothing, ends in
+    :func:`reconcile`).
 
     Precedence: a structural fault raised by a stage (invalid input, infeasible grip,
     overflow, event-log overflow, stall), then a finger without contact (the solve of such a

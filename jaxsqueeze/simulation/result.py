@@ -94,7 +94,8 @@ class SqueezeResult:
     radius: () fingertip radius [m].
     stats: :class:`~jaxsqueeze.simulation.engine.Stats` (steps, events, Newton and bracket
         iterations, largest Newton residual, solves, recomputations of the kept bordered
-        inverse).
+        inverse, and the most contact and sliding nodes at once: the smallest
+        ``Settings.capacity`` and ``sliding_capacity`` that run this squeeze without overflow).
     invalid: () int, index into ``validate.FIELDS`` of the first invalid input, -1 if none.
     margin: () smooth feasibility margin of the grip [rad]: the friction angle minus the larger
         angle between the segment joining the first contacts and their inward normals; < 0

@@ -349,9 +349,24 @@ def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monke
     fixed = jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=8, sliding_capacity=grown.sliding)))
     np.testing.assert_array_equal(res.modes, fixed.modes)
     np.testing.assert_array_equal(res.forces, fixed.forces)
+    # stats count the largest contact and sliding sets: the smallest capacities that run it
+    need = (int(res.stats.contacts), int(res.stats.sliding))
+    assert need == (np.max(np.sum(res.modes > 0, axis=1)), np.max(np.sum(res.modes >= 2, axis=1)))
+    tight = jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=need[0], sliding_capacity=need[1])))
+    assert tight.outcome == jsq.Status.SUCCESS
+    np.testing.assert_allclose(tight.forces, res.forces, rtol=0, atol=1e-12 * float(np.abs(res.forces).max()))
     for small in (jsq.Settings(capacity=4), jsq.Settings(sliding_capacity=1)):
         over = jsq.squeeze(slanted.replace(settings=small))
         assert over.outcome == jsq.Status.OVERFLOW and "sliding_capacity" in over.outcome.advice
+        # its stats name the set that overflowed (docs/errors.md: raise the capacity to them)
+        assert int(over.stats.contacts) > 4 if small.capacity else int(over.stats.sliding) > 1
+        # it ends at its last row solved with every contact in a slot (the rows of the full
+        # squeeze up to there), and logs the event that overflowed after it; the solve of
+        # the overflowing set was once recorded as a last row with pulling forces
+        n = int(over.count)
+        np.testing.assert_allclose(over.forces, res.forces[:n], rtol=0, atol=1e-12 * float(np.abs(res.forces).max()))
+        check_states(over, slanted.mesh, slanted.friction)
+        assert over.events.rows()[-1][0] > float(over.final_depth)
     compiled = []
     listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
     jax.monitoring.register_event_duration_secs_listener(listener)
