@@ -126,7 +126,7 @@ def _r_gap_tol(values, xp):
     t = xp.asarray(t)
     ok = _finite_pos(xp, t)
     size = _get(values, "size")
-    return ok if size is None else ok & (t <= GAP_SHARE * xp.asarray(size))
+    return ok if size is None else ok & _at_most(values, t, GAP_SHARE * xp.asarray(size))
 
 
 def _eps(values, step, xp):
@@ -135,6 +135,12 @@ def _eps(values, step, xp):
         return e
     dt = step.dtype if np.issubdtype(np.dtype(step.dtype), np.floating) else np.float64
     return float(np.finfo(dt).eps)
+
+
+def _at_most(values, t, limit):
+    """t <= limit, with a few ulps of slack: a tolerance set to exactly its limit (a tenth of
+    the step, 1 % of the size) must not be refused for the limit's own rounding."""
+    return t <= limit * (1 + 4 * _eps(values, t, None))
 
 
 def _r_step(values, xp):
@@ -165,7 +171,7 @@ def _r_event_tol(values, xp):
     ok = _finite_pos(xp, t)
     s = _get(values, "settings.step")
     if s is not None:             # compared only with a valid step (a bad step is reported once, as step)
-        ok = ok & ((t <= EVENT_SHARE * xp.asarray(s)) | ~_r_step(values, xp))
+        ok = ok & (_at_most(values, t, EVENT_SHARE * xp.asarray(s)) | ~_r_step(values, xp))
     return ok
 
 

@@ -47,6 +47,17 @@ KEY["adversary"] = "adversary.push"
 CASES = [(k, f, v) for k, f in enumerate(V.FIELDS) for v in BAD[KEY[f]]]
 
 
+@pytest.mark.parametrize("change", [{"settings.step": 3e-4, "settings.event_tol": 3e-5},
+                                    {"settings.gap_tol": 1e-3}, {"size": 0.7, "settings.gap_tol": 7e-3}], ids=str)
+def test_a_tolerance_at_exactly_its_limit_is_valid(change):
+    """event_tol a tenth of the step and gap_tol 1 % of the size are inside their limits, also
+    where the limit rounds below the number a user typed (0.1 * 3e-4 < 3e-5 and 0.01 * 0.7 <
+    7e-3 in binary)."""
+    vals = dict(GOOD, **change)
+    assert V.problems(vals) == [] and int(V.invalid_index(vals)) == -1
+    assert int(jax.jit(V.invalid_index)(vals)) == -1
+
+
 def test_every_field_has_bad_cases_and_rules_line_up():
     assert tuple(r.field for r in V.RULES) == V.FIELDS
     assert all(BAD[KEY[f]] for f in V.FIELDS)
