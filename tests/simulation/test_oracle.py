@@ -34,6 +34,12 @@ def _meshes():
         # 172 nodes, 2.5 mm edges at the slanted grip points
         "disk": jsq.shapes.disk(0.05, max_edge=0.02, refine_near=[list(p) for p in SLANTED], refine_edge=0.0025,
                                 refine_radius=0.005),
+        # 148 nodes, two boundary loops (40 outer, 14 on a 40 mm square hole): the hole's nodes
+        # are boundary nodes that never touch a fingertip, and the rigid modes see both loops
+        "holed": jsq.shapes.polygon([(-0.05, -0.05), (0.05, -0.05), (0.05, 0.05), (-0.05, 0.05)],
+                                    holes=[[(-0.02, -0.02), (-0.02, 0.02), (0.02, 0.02), (0.02, -0.02)]],
+                                    max_edge=0.025, refine_near=[list(p) for p in SLANTED], refine_edge=0.003,
+                                    refine_radius=0.003),
     }
 
 
@@ -50,6 +56,7 @@ CASES = {
     "stick (mu = inf)": ("square", SLANTED, "stick", np.inf, 0.02, 0.015, "A"),
     "coulomb symmetric": ("symmetric", CENTRED, "coulomb", 0.2, 0.03, 0.015, "A"),
     "frictionless symmetric": ("symmetric", CENTRED, "frictionless", 0.0, 0.03, 0.015, "A"),
+    "coulomb holed square (A, C, D)": ("holed", SLANTED, "coulomb", 0.25, 0.03, 0.015, "ACD"),
 }
 
 
