@@ -508,6 +508,7 @@ def test_float32_demo_squeeze_keeps_its_contact_forces_exact():
     cfg = grasp_mod.eager_config(demo, demo.operator())
     assert (cfg.capacity, cfg.sliding) == (32, 8)
     assert np.max(np.sum(r64.modes > 0, 1)) == 30 and np.max(np.sum(r64.modes >= 2, 1)) == 8
+    assert (int(r64.stats.contacts), int(r64.stats.sliding)) == (30, 8)       # what the README reads them from
     # docs/numerics.md §3: in float64 the demo's kept inverse never needs recomputing
     assert int(r64.stats.refreshes) == 0
     F32, F64 = np.array(r32["F"]), np.asarray(r64.total_force[-1])
