@@ -48,8 +48,10 @@ from .model import Model, gap_to_fingers
 #: into a symmetric square squeeze (a singular Newton system there); 1, 10 and 100 give the
 #: same forces to 5e-6 (docs/numerics.md, 5.1)
 NEUTRAL_REG = 100.0
-#: sliding slots solved in a compact system of this size when they fit (else all S slots)
-COMPACT = 16
+#: sliding slots solved in a compact system of this size when they fit (else all S slots).
+#: 8 covers the demo squeeze's sliding set (at most 8); at 16 a traced squeeze of it ran ~16 %
+#: slower (plain ``vmap`` of 64 foam-square grips: 8.3 against 7.0 ms per grasp, 2026-12-03)
+COMPACT = 8
 #: the kept inverse is recomputed from the bordered matrix (an O(S³) LU) when its backward
 #: error (:func:`drift`) exceeds this after a contact set change (float64, float32). Each
 #: bordering update subtracts the part of a node's compliance that the nodes in contact
@@ -364,7 +366,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
 
     The unknowns are only the sliding slots: gathered into ``Config.sliding`` positions (one
     system; more sliding slots stop the squeeze with an overflow), or with ``sliding = 0`` into
-    ``COMPACT`` positions when they fit (a 16 × 16 system instead of S × S), all S slots
+    ``COMPACT`` positions when they fit (an 8 × 8 system instead of S × S), all S slots
     otherwise (two systems in the program).
     """
     S = v.idx.shape[0]

@@ -156,7 +156,7 @@ class Settings:
     sliding_capacity: sliding contacts in the slip-angle Newton system (static; at most
         ``capacity``). More sliding nodes give ``Status.OVERFLOW``. ``None`` (default): an
         eager Coulomb squeeze starts with 8 and grows them like ``capacity``; a traced one,
-        and a frictionless one, solve up to 16 in a compact system and fall back to one over
+        and a frictionless one, solve up to 8 in a compact system and fall back to one over
         all slots (both compiled). One system is a smaller program (compiles faster) and a
         smaller one runs faster.
     max_steps: bound on loop iterations (steps plus event resolutions), static.

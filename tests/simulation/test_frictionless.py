@@ -68,6 +68,23 @@ def test_frictionless_squeeze_reaches_15_percent(runs, name):
     assert res.grip_force > 0.1 * 1e5 * 0.0254 * 0.3 * b   # a real compression, not a stall
 
 
+def test_compact_newton_system_and_its_fallback_equal_one_system_over_all_slots(runs):
+    """Every frictionless contact slides. Without a sliding capacity the slip angles are solved
+    in a ``contacts.COMPACT`` system while they fit and over all slots beyond (the traced
+    default too); the foam square passes from one to the other, and its history equals the
+    squeeze that solves one system over all slots throughout (``sliding_capacity`` = slots)."""
+    from jaxsqueeze.simulation.contacts import COMPACT
+    auto = runs["foam square"]
+    held = np.sum(np.asarray(auto.modes) > 0, axis=1)
+    assert held.min() <= COMPACT < held.max() == int(auto.stats.sliding)
+    C = auto.forces.shape[1]                 # the slots the automatic squeeze grew to
+    one = jsq.squeeze(scene("foam square").replace(settings=jsq.Settings(capacity=C, sliding_capacity=C)))
+    assert one.count == auto.count
+    np.testing.assert_array_equal(one.modes, auto.modes)
+    scale = np.abs(np.asarray(auto.forces)).max()
+    np.testing.assert_allclose(one.forces, auto.forces, rtol=0, atol=1e-10 * scale)
+
+
 def test_frictionless_is_the_small_friction_limit(runs):
     """Coulomb at μ = 0.01 and 0.001 on the ellipse (several contacts per finger): the grip force
     tends to the frictionless one linearly in μ (the gap falls tenfold); the foam square at
