@@ -503,3 +503,17 @@ def test_a_full_event_log_ends_the_squeeze_with_event_overflow(slanted):
     for a, b in zip(res.events, full.events):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[:2])
     assert float(res.final_depth) <= float(full.events.depth[2]) + 1e-12
+
+
+def test_newton_failure_records_where_newton_stopped(slanted):
+    """docs/errors.md: under NEWTON_FAILURE the last row holds the iterate where Newton stopped
+    (not a solution), and ``stats.residual`` includes its last update; the rows before it are
+    the converged squeeze. One Newton iteration cannot converge the first sliding row."""
+    full = jsq.squeeze(slanted)
+    res = jsq.squeeze(slanted.replace(settings=dataclasses.replace(slanted.settings, newton_iters=1)))
+    assert res.outcome == jsq.Status.NEWTON_FAILURE and "newton_iters" in res.outcome.advice
+    tol = 1e-11                                          # the float64 default of Settings.newton_tol
+    assert float(res.stats.residual) > tol >= float(full.stats.residual)
+    k = int(res.count) - 1                               # the failed row; those before it converged
+    assert k > 0 and np.any(np.asarray(res.modes[k]) >= 2)
+    np.testing.assert_allclose(res.forces[:k], full.forces[:k], rtol=0, atol=1e-12 * np.abs(full.forces).max())
