@@ -16,7 +16,7 @@ stick/slip, 15 mm, float64), in one run:
   ``jsq.squeeze`` of the scene in a fresh process (operator build to result), with the
   number of programs it compiled.
 * ``batch`` on the CPU for ``--batches`` (1/16/64/256) candidate grips: a plain loop of
-  ``jsq.squeeze`` (up to ``--loop-max``), ``jax.vmap`` of the core in a fresh process (stopped
+  ``jsq.squeeze`` (best of ``--reps``, up to ``--loop-max``: 256), ``jax.vmap`` of the core in a fresh process (stopped
   after ``--vmap-timeout`` s and then reported as a bound), and :func:`jaxsqueeze.batch.map_scenes`
   (one single-threaded process per core, wall time including the workers' start-up and
   compile or cache load), and :func:`jaxsqueeze.batch.split_vmap` in a fresh process with one
@@ -284,7 +284,7 @@ def main(argv=None):
     p.add_argument("--gpu-batches", type=int, nargs="+", default=[1, 256, 1024, 4096])
     p.add_argument("--vmap-timeout", type=float, default=90.0,
                    help="seconds per CPU vmap point (compile + one run) before it is stopped and reported as a bound")
-    p.add_argument("--loop-max", type=int, default=64, help="largest batch timed as a plain loop")
+    p.add_argument("--loop-max", type=int, default=256, help="largest batch timed as a plain loop")
     p.add_argument("--processes", type=int, default=None, help="pool workers (default: one per core)")
     p.add_argument("--out", default=os.path.join(HERE, "results"))
     p.add_argument("--worker", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
@@ -422,9 +422,7 @@ def main(argv=None):
     for B in a.batches:
         q = grips(sc.mesh, B)
         if B <= a.loop_max:
-            t = time.perf_counter()
-            outs = [evaluate_grip(g) for g in q]
-            dt = time.perf_counter() - t
+            dt, outs = best_of(lambda: [evaluate_grip(g) for g in q], a.reps)    # as the vmap: best of reps
             loop_pg = dt / B
             rec("batch", "loop of jsq.squeeze (one process, XLA default threads)", batch=B, seconds=dt,
                 per_grasp_ms=1e3 * dt / B, evals_per_min=60 * B / dt, mean_rows=float(np.mean([o[1] for o in outs])),
