@@ -112,3 +112,23 @@ def sliding_against_friction(res, tol=1e-12):
     same = (md[1:] == md[:-1]) & (md[1:] >= 2)
     sign = np.where(md[1:] == 2, 1.0, -1.0)
     return np.argwhere(same & (sign * np.diff(th, axis=0) < -tol)) + [1, 0]
+
+
+def replay_events(res, frictionless=False):
+    """Replay a squeeze's event log from its grip (A joins sticking, or sliding when
+    frictionless; B lets go; C slides; D sticks) and assert that every recorded row holds the
+    contact set and the stick/slip modes the events up to its depth give: the log is the whole
+    history of the modes. (A squeeze without an adversary: push events are at push displacements.)"""
+    nodes, depth, modes = np.asarray(res.nodes), np.asarray(res.depth), np.asarray(res.modes)
+    rows = res.events.rows()
+    for r in range(len(depth)):
+        held = {int(g): "slide" if frictionless else "stick" for g in res.grip}
+        for d, n, kind, _ in rows:
+            if d > depth[r]:
+                break
+            if kind == "B":
+                held.pop(n, None)
+            else:
+                held[n] = "stick" if kind == "D" or (kind == "A" and not frictionless) else "slide"
+        got = {int(nodes[i]): "stick" if modes[r, i] == 1 else "slide" for i in np.nonzero(modes[r] > 0)[0]}
+        assert held == got, f"row {r} (d = {depth[r]:.6g} m): log {held}, rows {got}"

@@ -37,7 +37,7 @@ bordered, operator or linalg modules); it only follows the library's documented 
   evaluated only once the node's rate has been positive (the documented "armed" rule,
   docs/numerics.md section 6). A new contact is hypothesized sticking (Section IV-B.1): if
   the rate of its force (from two probes slightly deeper) leaves the cone it slides on the
-  edge it leaves through. Events found in one bisection bracket are applied together (mirror-
+  edge it leaves through, a C event at the depth it joined (a grip node: at d = 0). Events found in one bisection bracket are applied together (mirror-
   symmetric pairs share a depth).
 * D at an event depth: after the events of one depth are applied (and the new contacts'
   hypotheses settled), armed sliding nodes whose rate is negative stick there (D events at
@@ -508,9 +508,10 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
     d = 0.0
     st = sq.solve(cfg, d)
     status = "SUCCESS"
+    slid = []
     if model == "coulomb" and sq.rot is None:
         # a grip inside both cones sticks; test at a probe depth as for any new contact
-        cfg, st = _hypothesis(sq, cfg, set(cfg), d, probe, ftol)
+        cfg, st, slid = _hypothesis(sq, cfg, set(cfg), d, probe, ftol)
         status = _failure(sq, cfg)
     # with rotating tips the grip forces turn as d grows (the tip's twist adds a tangential
     # push), so a grip on its cone edge may leave the cone after a few nm, at a depth the probe
@@ -518,6 +519,7 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
     # (fuzz seed 1 #51: grip within CONE_SLACK of the edge, C at 1e-7 rad / alpha' = 4.2e-9 m)
     cfg, st, status, d, events, rows = _run(sq, cfg, st, status, 0.0, D, h, depth_tol, gap_tol, probe, ftol, rtol,
                                             max_events)
+    events = slid + events
     res = _result(sq, cfg, st, status, d, events, E, thickness)
     res.squeeze_status = status
     res.squeeze_events = len(events)
@@ -649,7 +651,8 @@ def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, ma
                 cfg[k].armed = False
             elif kind == "D":
                 cfg[k].mode = 1
-        cfg, st = _hypothesis(sq, cfg, new, d, probe, ftol)
+        cfg, st, slid = _hypothesis(sq, cfg, new, d, probe, ftol)
+        events += slid
         status = _failure(sq, cfg)
         if status == "SUCCESS" and model == "coulomb":
             # D at an event depth (docs/numerics.md section 6): the events changed every rate; an
@@ -703,8 +706,10 @@ def _hypothesis(sq, cfg, new, d, probe, ftol):
     """New contacts start sticking. Their force grows from zero: a force rate (the difference of
     the forces at d + probe and d + 2 probe, which drops the tiny push of the gap_tol
     penetration the contact was found at) outside the cone turns the node into a slider on
-    the edge it leaves through (frictionless contacts: labelled by their angle rate). The cone
-    is the fingertip's (segment contacts) or the deformed surface's (point contacts)."""
+    the edge it leaves through, a C event at d (frictionless contacts: labelled by their angle
+    rate, no event). The cone is the fingertip's (segment contacts) or the deformed surface's
+    (point contacts). Returns (cfg, st, the C events)."""
+    slid = []
     if new:
         st1 = sq.solve(cfg, d + probe)
         st2 = sq.solve(cfg, d + 2 * probe)
@@ -724,6 +729,7 @@ def _hypothesis(sq, cfg, new, d, probe, ftol):
             if sq.model == "coulomb" and c.mode == 1:
                 if cone_margin(dfn, dft, sq.mu) < 0:
                     c.mode = 2 if dft < 0 else 3
+                    slid.append(Event("C", int(sq.bnd[k]), d * sq.L, c.finger))
         if sq.model == "frictionless":
             st = sq.solve(cfg, d + probe)
             for a, k in enumerate(st["keys"]):
@@ -731,7 +737,7 @@ def _hypothesis(sq, cfg, new, d, probe, ftol):
                     cfg[k].mode = 2 if st["rate"][a] >= 0 else 3
     st = sq.solve(cfg, d)
     _arm(cfg, st, 0)
-    return cfg, st
+    return cfg, st, slid
 
 
 def _failure(sq, cfg):

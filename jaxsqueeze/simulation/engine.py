@@ -455,8 +455,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     ``logged`` (m,) the nodes whose change is an event of the log, of kinds ``kinds`` (m,).
 
     Coulomb and full stick: on the first pass a new contact that would pull at the probe is
-    dropped (in float32: whose force's rate is not positive, as its value is round-off); under
-    Coulomb, one whose force leaves its cone slides against its tangential force. On every pass
+    dropped, a B event (in float32: whose force's rate is not positive, as its value is round-off); under
+    Coulomb, one whose force leaves its cone slides against its tangential force, a C event at
+    the depth it joined (a grip node at d = 0). On every pass
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
@@ -491,7 +492,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32 else (fn <= 0))
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test
-    theta, stuck = ns.theta, jnp.zeros_like(on)
+    theta, stuck, out = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on)
     if model.cfg.slip_events:
         out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
         mode = jnp.where(out, jnp.where(ft < 0, SLIP_POS, SLIP_NEG), mode)
@@ -512,8 +513,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # (point contacts let the other nodes sink by design)
     sunk = jnp.any((ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol)) if model.cfg.contact == "segment" \
         else jnp.array(False)
-    return (mode, ns.finger, theta, jnp.any(mode != ns.mode), sunk, peeled | stuck,
-            jnp.where(stuck, 3, 1).astype(jnp.int32))
+    return (mode, ns.finger, theta, jnp.any(mode != ns.mode), sunk, pull | peeled | stuck | out,
+            jnp.where(stuck, 3, jnp.where(out, 2, 1)).astype(jnp.int32))
 
 
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):

@@ -32,6 +32,12 @@ class EventLog(NamedTuple):
     kind: (E,) 0–3 for events A (new contact), B (break), C (stick→slip), D (slip→stick);
     finger: (E,) 0 for the still finger, 1 for the moving one, 2 for the adversary's.
 
+    The log is the whole history of the contact modes: replayed from the grip (A joins
+    sticking, or sliding when frictionless; B lets go; C slides; D sticks) it gives the
+    contact set and the stick/slip modes of every row. A new contact whose force leaves its
+    friction cone as it grows from zero slides from the start: its A is followed by a C at the
+    same depth (a grip node's C is at depth 0).
+
     An eager squeeze's log holds its events only. The log of a result from ``jax.jit`` or
     ``squeeze(..., trim=False)`` keeps its fixed capacity (``Settings.max_events`` rows, the
     first ``result.n_events`` valid): read ``result.trim().events``.
