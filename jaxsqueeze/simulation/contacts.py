@@ -48,10 +48,14 @@ from .model import Model, gap_to_fingers
 #: into a symmetric square squeeze (a singular Newton system there); 1, 10 and 100 give the
 #: same forces to 5e-6 (docs/numerics.md, 5.1)
 NEUTRAL_REG = 100.0
-#: sliding slots solved in a compact system of this size when they fit (else all S slots).
-#: 8 covers the demo squeeze's sliding set (at most 8); at 16 a traced squeeze of it ran ~16 %
-#: slower (plain ``vmap`` of 64 foam-square grips: 8.3 against 7.0 ms per grasp, 2026-12-03)
+#: sliding slots solved in a compact system of this size when they fit (else all S slots),
+#: under Coulomb friction. 8 covers the demo squeeze's sliding set (at most 8); at 16 a traced
+#: squeeze of it ran ~16 % slower (plain ``vmap`` of 64 foam-square grips: 8.3 against 7.0 ms
+#: per grasp, 2026-12-03)
 COMPACT = 8
+#: the same when every contact slides (frictionless): the contact set outgrows 8 within a few
+#: rows, and at 8 a frictionless foam-square squeeze ran 20 % slower than at 16
+COMPACT_ALL = 16
 #: the kept inverse is recomputed from the bordered matrix (an O(S³) LU) when its backward
 #: error (:func:`drift`) exceeds this after a contact set change (float64, float32). Each
 #: bordering update subtracts the part of a node's compliance that the nodes in contact
@@ -366,7 +370,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
 
     The unknowns are only the sliding slots: gathered into ``Config.sliding`` positions (one
     system; more sliding slots stop the squeeze with an overflow), or with ``sliding = 0`` into
-    ``COMPACT`` positions when they fit (an 8 × 8 system instead of S × S), all S slots
+    ``COMPACT`` positions (``COMPACT_ALL`` frictionless) when they fit (an 8 × 8 system instead of S × S), all S slots
     otherwise (two systems in the program).
     """
     S = v.idx.shape[0]
@@ -482,9 +486,10 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
 
     if cfg.sliding_limited:     # one system; more sliding slots are an overflow
         return lax.cond(n > 0, compact(cfg.sliding), still)
-    if cfg.sliding or S <= COMPACT:
+    Q = COMPACT_ALL if held else COMPACT
+    if cfg.sliding or S <= Q:
         return lax.cond(n > 0, full, still)
-    return lax.switch(jnp.where(n == 0, 0, jnp.where(n <= COMPACT, 1, 2)), [still, compact(COMPACT), full])
+    return lax.switch(jnp.where(n == 0, 0, jnp.where(n <= Q, 1, 2)), [still, compact(Q), full])
 
 
 @jax.custom_jvp

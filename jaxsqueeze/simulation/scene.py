@@ -155,9 +155,9 @@ class Settings:
         slots are faster: the bordered inverse is (2·capacity + 3)².
     sliding_capacity: sliding contacts in the slip-angle Newton system (static; at most
         ``capacity``). More sliding nodes give ``Status.OVERFLOW``. ``None`` (default): an
-        eager Coulomb squeeze starts with 8 and grows them like ``capacity``; a traced one,
-        and a frictionless one, solve up to 8 in a compact system and fall back to one over
-        all slots (both compiled). One system is a smaller program (compiles faster) and a
+        eager Coulomb squeeze starts with 8 and grows them like ``capacity``; a traced one
+        solves up to 8 (a frictionless one, eager or traced, 16) in a compact system and falls
+        back to one over all slots (both compiled). One system is a smaller program (compiles faster) and a
         smaller one runs faster.
     max_steps: bound on loop iterations (steps plus event resolutions), static.
     max_events: capacity of the event log, static.

@@ -10,6 +10,7 @@ squeeze (the gap shrinks in proportion to μ).
 """
 from __future__ import annotations
 
+import jax
 import numpy as np
 import pytest
 
@@ -70,10 +71,10 @@ def test_frictionless_squeeze_reaches_15_percent(runs, name):
 
 def test_compact_newton_system_and_its_fallback_equal_one_system_over_all_slots(runs):
     """Every frictionless contact slides. Without a sliding capacity the slip angles are solved
-    in a ``contacts.COMPACT`` system while they fit and over all slots beyond (the traced
-    default too); the foam square passes from one to the other, and its history equals the
+    in a ``contacts.COMPACT_ALL`` system while they fit and over all slots beyond (a traced
+    Coulomb squeeze the same with ``COMPACT``); the foam square passes from one to the other, and its history equals the
     squeeze that solves one system over all slots throughout (``sliding_capacity`` = slots)."""
-    from jaxsqueeze.simulation.contacts import COMPACT
+    from jaxsqueeze.simulation.contacts import COMPACT_ALL as COMPACT
     auto = runs["foam square"]
     held = np.sum(np.asarray(auto.modes) > 0, axis=1)
     assert held.min() <= COMPACT < held.max() == int(auto.stats.sliding)
@@ -101,6 +102,17 @@ def test_frictionless_is_the_small_friction_limit(runs):
     foam = jsq.squeeze(scene("foam square", "coulomb", 0.01))
     assert jsq.Status(int(foam.status)) == jsq.Status.SUCCESS
     assert foam.grip_force == pytest.approx(runs["foam square"].grip_force, rel=2e-3)
+    # traced, the same squeeze solves its slip angles in a ``contacts.COMPACT`` system while
+    # they fit and over all 64 slots beyond (the eager one grew one system to its sliding set)
+    from jaxsqueeze.simulation.contacts import COMPACT
+    assert COMPACT < int(foam.stats.sliding)
+    traced = jax.jit(lambda mu: jsq.squeeze(scene("foam square", "coulomb", mu)))(0.01).trim()
+    assert traced.count == foam.count
+    np.testing.assert_array_equal(traced.modes, foam.modes)
+    # the located event depths differ by round-off (1.5e-12 m measured, 1e-10 of the object's
+    # size allowed), which moves an event row's forces by dF/dd times that (2e-10 of the largest)
+    np.testing.assert_allclose(traced.depth, foam.depth, rtol=0, atol=1e-10 * 0.1)
+    np.testing.assert_allclose(traced.forces, foam.forces, rtol=0, atol=1e-9 * np.abs(foam.forces).max())
 
 
 def test_a_coarse_asymmetric_mesh_stalls_early_and_says_so():
