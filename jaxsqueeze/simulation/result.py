@@ -34,9 +34,10 @@ class EventLog(NamedTuple):
 
     The log is the whole history of the contact modes: replayed from the grip (A joins
     sticking, or sliding when frictionless; B lets go; C slides; D sticks) it gives the
-    contact set and the stick/slip modes of every row. A new contact whose force leaves its
-    friction cone as it grows from zero slides from the start: its A is followed by a C at the
-    same depth (a grip node's C is at depth 0).
+    contact set and the stick/slip modes of every row (where rows share a depth, an event
+    located at the depth of the one before, of the last of them). A new contact whose force
+    leaves its friction cone as it grows from zero slides from the start: its A is followed
+    by a C at the same depth (a grip node's C is at depth 0).
 
     An eager squeeze's log holds its events only. The log of a result from ``jax.jit`` or
     ``squeeze(..., trim=False)`` keeps its fixed capacity (``Settings.max_events`` rows, the
