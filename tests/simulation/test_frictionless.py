@@ -72,12 +72,13 @@ def test_frictionless_squeeze_reaches_15_percent(runs, name):
 def test_compact_newton_system_and_its_fallback_equal_one_system_over_all_slots(runs):
     """Every frictionless contact slides. Without a sliding capacity the slip angles are solved
     in a ``contacts.COMPACT_ALL`` system while they fit and over all slots beyond (a traced
-    Coulomb squeeze the same with ``COMPACT``); the foam square passes from one to the other, and its history equals the
-    squeeze that solves one system over all slots throughout (``sliding_capacity`` = slots)."""
-    from jaxsqueeze.simulation.contacts import COMPACT_ALL as COMPACT
+    Coulomb squeeze the same with ``COMPACT``: next test); the foam square passes from one to
+    the other, and its history equals the squeeze that solves one system over all slots
+    throughout (``sliding_capacity`` = slots)."""
+    from jaxsqueeze.simulation.contacts import COMPACT_ALL
     auto = runs["foam square"]
     held = np.sum(np.asarray(auto.modes) > 0, axis=1)
-    assert held.min() <= COMPACT < held.max() == int(auto.stats.sliding)
+    assert held.min() <= COMPACT_ALL < held.max() == int(auto.stats.sliding)
     C = auto.forces.shape[1]                 # the slots the automatic squeeze grew to
     one = jsq.squeeze(scene("foam square").replace(settings=jsq.Settings(capacity=C, sliding_capacity=C)))
     assert one.count == auto.count
