@@ -370,8 +370,8 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
 
     The unknowns are only the sliding slots: gathered into ``Config.sliding`` positions (one
     system; more sliding slots stop the squeeze with an overflow), or with ``sliding = 0`` into
-    ``COMPACT`` positions (``COMPACT_ALL`` frictionless) when they fit (an 8 × 8 system instead of S × S), all S slots
-    otherwise (two systems in the program).
+    ``COMPACT`` positions (``COMPACT_ALL`` frictionless) when they fit (an 8 × 8 system
+    instead of S × S), all S slots otherwise (two systems in the program).
     """
     S = v.idx.shape[0]
     cfg = model.cfg

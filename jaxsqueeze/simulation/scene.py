@@ -157,8 +157,8 @@ class Settings:
         ``capacity``). More sliding nodes give ``Status.OVERFLOW``. ``None`` (default): an
         eager Coulomb squeeze starts with 8 and grows them like ``capacity``; a traced one
         solves up to 8 (a frictionless one, eager or traced, 16) in a compact system and falls
-        back to one over all slots (both compiled). One system is a smaller program (compiles faster) and a
-        smaller one runs faster.
+        back to one over all slots (both compiled). One system is a smaller program (compiles
+        faster) and a smaller one runs faster.
     max_steps: bound on loop iterations (steps plus event resolutions), static.
     max_events: capacity of the event log, static.
     newton_iters: Newton iteration bound, static.
