@@ -44,6 +44,10 @@ class Fingers:
             r = np.asarray(self.radius, float)
             if not (np.all(np.isfinite(r)) and np.all(r > 0)):
                 raise ValueError(f"Fingers.radius={self.radius!r} must be a finite length > 0 m.")
+        if isinstance(self.rotation, (list, tuple)) and len({np.shape(row) for row in self.rotation}) > 1:
+            raise ValueError(f"Fingers.rotation rows have different lengths {[np.shape(row) for row in self.rotation]}: "
+                             "give both fingers k coefficients, padding the shorter polynomial with leading zeros "
+                             "(highest power first).")
         if self.rotation is not None and numeric(self.rotation):
             rot = np.asarray(self.rotation, float)
             if rot.ndim != 2 or rot.shape[0] != 2 or not np.all(np.isfinite(rot)):
@@ -281,7 +285,8 @@ class Scene:
                              "use scene.replace(grip=None, placement=...) or scene.replace(placement=None, grip=...).")
         if numeric(self.grip) and self.placement is None:
             g = np.asarray(self.grip)
-            if g.shape[-1:] != (2,) or not np.issubdtype(g.dtype, np.integer):
+            flags = isinstance(self.grip, (tuple, list)) and any(isinstance(v, (bool, np.bool_)) for v in self.grip)
+            if g.shape[-1:] != (2,) or not np.issubdtype(g.dtype, np.integer) or flags:
                 raise ValueError(f"grip={self.grip!r} must be two integer boundary node indices (i, j).")
             if g.ndim == 1:
                 if g[0] == g[1]:

@@ -543,10 +543,12 @@ def test_material_gaps(kw, match):
 @pytest.mark.parametrize("change, match", [
     (lambda s: s.replace(fingers=jsq.Fingers(radius=0.0)), r"radius=0\.0 must be .* > 0"),
     (lambda s: s.replace(fingers=jsq.Fingers(radius=float("nan"))), r"radius=nan"),
+    (lambda s: s.replace(fingers=jsq.Fingers(radius=0.01, rotation=[[0.1, 0.0], [0.0]])), r"leading zeros"),
     (lambda s: s.replace(depth=-0.01), r"depth=-0\.01 must be .* > 0"),
     (lambda s: s.replace(depth=float("inf")), r"depth=inf"),
     (lambda s: s.replace(friction=float("nan")), r"friction=nan .* mu >= 0"),
     (lambda s: s.replace(grip=(1.0, 5.0)), r"two integer boundary node indices"),
+    (lambda s: s.replace(grip=(True, s.grip[1])), r"two integer boundary node indices"),   # not node 1
     (lambda s: s.replace(settings=jsq.Settings(capacity=1)), r"capacity"),
     (lambda s: s.replace(settings=jsq.Settings(step=-1e-3)), r"Settings\.step=-0\.001"),
     (lambda s: jsq.squeeze(s.replace(grip=(s.grip[0], nearest(SQ, (0.05, 0.0))))), r"friction cones"),
