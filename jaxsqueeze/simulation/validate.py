@@ -107,6 +107,9 @@ def _r_depth(values, xp):
         return None
     d = xp.asarray(d)
     ok = _finite_pos(xp, d)
+    size = _get(values, "size")
+    if size is not None:     # as deep as the object is across: the squeeze would crush it
+        ok = ok & (d < xp.asarray(size))
     gd = _get(values, "grip_distance")
     if gd is not None:       # compared only with a valid grip (a bad grip is reported once, as grip)
         grip_ok = _r_grip(values, xp)
@@ -267,8 +270,9 @@ RULES: tuple[Rule, ...] = (
     Rule("fingers.radius", _r_positive("fingers.radius"), "a finite fingertip radius > 0 m",
          "set Fingers(radius=...) in metres"),
     Rule("friction", _r_friction, "a finite Coulomb coefficient mu >= 0", "use e.g. friction = 0.5"),
-    Rule("depth", _r_depth, "a finite depth > 0 m, smaller than the distance between the grip nodes "
-         "(deeper, the fingertips pass through each other)", "lower the depth or grip farther apart"),
+    Rule("depth", _r_depth, "a finite depth > 0 m, smaller than the object's size (deeper, the squeeze would "
+         "crush it) and than the distance between the grip nodes (deeper, the fingertips pass through each other)",
+         "lower the depth (the paper's squeezes stop near 15 % of the size) or grip farther apart"),
     Rule("settings.step", _r_step, "a finite step > 0 m, at most the depth, and above what the depth's "
          f"round-off can resolve ({STEP_RESOLUTION:g} * eps * depth)",
          "use the default (Settings.step=None, depth / 50) or a step of about depth / 50"),
@@ -332,8 +336,10 @@ def _show(v) -> str:
 
 def _context(rule: Rule, values) -> str:
     f = rule.field
-    if f == "depth" and values.get("grip_distance") is not None:
-        return f" (grip distance {_show(values['grip_distance'])} m)"
+    if f == "depth":
+        said = [f"{name} {_show(values[key])} m" for key, name in (("grip_distance", "grip distance"),
+                                                                  ("size", "object size")) if values.get(key) is not None]
+        return f" ({', '.join(said)})" if said else ""
     if f == "settings.event_tol" and values.get("settings.step") is not None:
         return f" (step {_show(values['settings.step'])} m)"
     if f == "settings.step" and values.get("depth") is not None:

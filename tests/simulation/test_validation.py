@@ -192,6 +192,20 @@ def test_scene_values_eager_and_batched(square):
     assert int(g(jnp.array([sc.grip[0]] * 2))) == V.FIELDS.index("grip")
 
 
+def test_a_depth_as_large_as_the_object_is_refused_also_across_a_diagonal(square):
+    """A grip across the square's diagonal is 0.14 m apart, so a 0.105 m squeeze passes the
+    grip-distance rule; it is deeper than the object is across (0.1 m) and was SUCCESS with
+    no word (a deeper squeeze than the 50 % that warns). Refused eagerly, in scene values and
+    under jit, naming the object size."""
+    sw = jsq.scene.nearest_boundary_node(square, (-0.05, -0.05))
+    ne = jsq.scene.nearest_boundary_node(square, (0.05, 0.05))
+    sc = _scene(square).replace(grip=(sw, ne), depth=0.105)
+    with pytest.raises(ValueError, match=r"depth = 0\.105 \(grip distance 0\.14.* m, object size 0\.1 m\).*crush"):
+        jsq.squeeze(sc)
+    f = jax.jit(lambda d: V.invalid_index(V.values_of(sc.replace(depth=d))))
+    assert int(f(0.105)) == V.FIELDS.index("depth") and int(f(0.099)) == -1
+
+
 @pytest.mark.parametrize("change,field", [
     (dict(friction=[0.2, 0.3]), "friction has shape \\(2,\\)"),
     (dict(depth=[0.01]), "depth has shape \\(1,\\)"),
