@@ -9,6 +9,10 @@ nodes, ``-Y``, so boundary nodes lie exactly on the intended outline: straight e
 circles, ellipses). Interior triangles are quality meshed (minimum angle 30 degrees) with
 area at most ``AREA_FACTOR * sqrt(3)/4 * max_edge**2``; with ``AREA_FACTOR = 1.5`` the mean
 interior edge is about ``max_edge`` (a 0.1 m square with ``max_edge=0.004`` has ~800 nodes).
+Where the object is thinner than about ``max_edge``, Triangle cannot keep its angles without
+boundary nodes it may not add: a mesh with angles under :data:`MIN_ANGLE` (20 degrees, less
+at sharp outline corners) is refused with the thickness to use (one sliver across a 2 mm
+strip made a squeeze 20x too stiff).
 
 Local refinement. With ``refine_near`` (k, 2) points, the target edge length becomes
 
@@ -422,4 +426,39 @@ def _mesh_rings(rings, hole_points, h) -> Mesh:
         out = tr.triangulate(out, "rpq30aYQ")
     pts = out["vertices"] * scale + shift
     pts[: len(verts)] = verts
+    _check_quality(pts, out["triangles"], rings, h)
     return Mesh.from_arrays(pts, out["triangles"])
+
+
+#: the smallest angle [degrees] :func:`_mesh_rings` accepts (Triangle keeps 30 degrees where the
+#: boundary nodes allow it), or three quarters of the outline's sharpest corner if less: near
+#: a corner of angle a Triangle cannot keep angles above about a
+MIN_ANGLE = 20.0
+
+
+def _angles(p) -> np.ndarray:
+    """(t, 3) interior angles [degrees] of triangles p (t, 3, 2)."""
+    a, b = np.roll(p, -1, axis=1) - p, np.roll(p, 1, axis=1) - p
+    cos = (a * b).sum(-1) / np.maximum(np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1), 1e-300)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _check_quality(pts, tri, rings, h) -> None:
+    """ValueError naming ``max_edge`` where the boundary spacing is too coarse for the outline:
+    where the object is thinner than about ``max_edge`` (and Triangle may add no boundary
+    nodes, ``-Y``), the elements across it are slivers, one element thick, whose stiffness is
+    far off (a 2 mm strip meshed at 20 mm: 20x too stiff). The bound is :data:`MIN_ANGLE`, or
+    less at sharp outline corners (a 20 degree wedge has triangles of ~18 degrees at its tip)."""
+    corners = min(float(_angles(np.stack([np.roll(r, 1, axis=0), r, np.roll(r, -1, axis=0)], axis=1))[:, 1].min())
+                  for r in rings)
+    ang = _angles(pts[tri]).min(axis=1)
+    k = int(np.argmin(ang))
+    if ang[k] >= min(MIN_ANGLE, 0.75 * corners):
+        return
+    p = pts[tri[k]]
+    thin = float(abs(_cross(p[0], p[1], p[2])) / np.linalg.norm(p - np.roll(p, 1, axis=0), axis=1).max())
+    where = ", ".join(f"{c:.4g}" for c in p.mean(axis=0))
+    raise ValueError(f"max_edge = {h.max_edge:g} m is too coarse for this outline: near ({where}) m the object is "
+                     f"about {thin:.2g} m thin and the mesh puts one sliver across it (angles down to {ang[k]:.3g} "
+                     f"degrees), far too stiff; use max_edge <= {thin:.2g} m, or refine_near that place with "
+                     f"refine_edge <= {thin:.2g} m.")

@@ -222,12 +222,11 @@ def _unknown(prefix, table, allowed):
 
 
 def _wrap(err: ValueError, default: str, names: dict) -> SceneFileError:
-    """Map a library ValueError to the key whose name its message mentions."""
+    """Map a library ValueError to the key whose name its message mentions first (its advice
+    may name others)."""
     msg = str(err)
-    for pattern, key in names.items():
-        if re.search(pattern, msg):
-            return SceneFileError(key, msg)
-    return SceneFileError(default, msg)
+    found = [(m.start(), k, key) for k, (pattern, key) in enumerate(names.items()) if (m := re.search(pattern, msg))]
+    return SceneFileError(min(found)[2] if found else default, msg)
 
 
 # ----------------------------------------------------------------------------- loading

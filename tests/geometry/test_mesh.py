@@ -223,6 +223,28 @@ def test_a_curved_outline_needs_eight_nodes(make):
         make()
 
 
+@pytest.mark.parametrize("make, coarse, thin", [
+    (lambda e: shapes.rectangle(0.1, 0.002, max_edge=e), 0.02, 0.002),
+    (lambda e: shapes.ellipse(0.06, 0.004, max_edge=e), 0.02, 0.004),     # thin near its ends
+    (lambda e: shapes.annulus(0.05, 0.048, max_edge=e), 0.01, 0.002),
+])
+def test_a_max_edge_coarser_than_the_object_is_thin_is_refused(make, coarse, thin):
+    """Boundary nodes 20 mm apart on a 2 mm strip (Triangle adds none, -Y) left one sliver
+    across it (5.7 degrees) and a squeeze 20x too stiff, with SUCCESS. Refused, naming the
+    thickness, whose max_edge then meshes at the promised quality."""
+    with pytest.raises(ValueError, match=rf"max_edge = .* too coarse .* about {thin:g} m thin .* max_edge <= {thin:g} m"):
+        make(coarse)
+    assert make(thin).min_angle() > 30.0
+
+
+def test_a_sharp_corner_is_not_taken_for_a_thin_object():
+    """Triangle keeps its 30 degrees only away from sharper outline corners: a 20 degree
+    wedge meshes (its tip triangles ~18 degrees)."""
+    t = np.radians(20.0)
+    m = shapes.polygon([[0, 0], [0.1, 0], [0.1 * np.cos(t), 0.1 * np.sin(t)]], max_edge=0.01)
+    assert 15.0 < m.min_angle() < 20.0
+
+
 def test_annulus():
     m = shapes.annulus(0.05, 0.02, 0.004, center=(1.0, 1.0))
     assert len(m.loops) == 2
