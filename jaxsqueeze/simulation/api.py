@@ -365,10 +365,10 @@ def check_operator(scene: Scene, op: Compliance) -> None:
 
 def check_force_scale(op: Compliance) -> None:
     """Raise ``ValueError`` when forces of the scale E h L [N] would overflow the operator's
-    precision: (1000 E h L)², what a force's magnitude squares, must stay finite."""
+    precision (:func:`validate.force_limit`; traced, the ``material.E`` rule)."""
     dt = np.dtype(op.G.dtype)
     scale = float(np.asarray(op.stiffness, dt) * np.asarray(op.length, dt))
-    if not 1e3 * scale < float(np.sqrt(np.finfo(dt).max)):
+    if not scale < validate.force_limit(float(np.finfo(dt).eps)):
         raise ValueError(f"the force scale E * thickness * size = {scale:.3g} N is too large for {dt.name} (forces "
                          f"are squared in magnitudes, largest {float(np.finfo(dt).max):.3g}): check the units of E (Pa) "
                          "and the thickness (m)" + (", or compute in float64 (jax.config.update('jax_enable_x64', "

@@ -85,6 +85,25 @@ def _r_positive(name):
     return rule
 
 
+def force_limit(eps: float) -> float:
+    """The largest force scale E h L [N] of a precision with machine epsilon ``eps``: forces are
+    squared in magnitudes, so (1000 E h L)^2 must stay finite."""
+    return 1e-3 * float(np.sqrt(np.finfo(np.float32 if eps > 1e-10 else np.float64).max))
+
+
+def _r_E(values, xp):
+    E = _get(values, "material.E")
+    if E is None:
+        return None
+    E = xp.asarray(E)
+    ok = _finite_pos(xp, E)
+    h, size = _get(values, "material.thickness"), _get(values, "size")
+    if h is not None and size is not None:    # compared only with a valid thickness (reported once, as itself)
+        h = xp.asarray(h)
+        ok = ok & ((E * h * xp.asarray(size) < force_limit(_eps(values, E, xp))) | ~_finite_pos(xp, h))
+    return ok
+
+
 def _r_nu(values, xp):
     nu = _get(values, "material.nu")
     if nu is None:
@@ -262,8 +281,10 @@ class Rule(NamedTuple):
 
 
 RULES: tuple[Rule, ...] = (
-    Rule("material.E", _r_positive("material.E"), "a finite Young's modulus > 0 Pa",
-         "set Material(E=...) to the material's modulus in Pa (foam ~1e5, rubber ~1e6)"),
+    Rule("material.E", _r_E, "a finite Young's modulus > 0 Pa whose force scale E * thickness * size [N] the "
+         f"precision holds (its square times 1e6 finite: below {force_limit(1e-16):.3g} N in float64, "
+         f"{force_limit(1e-7):.3g} N in float32)",
+         "set Material(E=...) to the material's modulus in Pa (foam ~1e5, rubber ~1e6) and the thickness in m"),
     Rule("material.nu", _r_nu, "a Poisson's ratio with -1 < nu <= 0.5", "use e.g. nu = 0.3"),
     Rule("material.thickness", _r_positive("material.thickness"), "a finite thickness > 0 m",
          "set Material(thickness=...) in metres"),
@@ -647,4 +668,4 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
            "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
            "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
-           "shape_problems", "unit_problems", "deep_warning", "boundary_points"]
+           "shape_problems", "unit_problems", "deep_warning", "boundary_points", "force_limit"]

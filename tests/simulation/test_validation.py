@@ -24,7 +24,7 @@ GOOD = {
 NAN, INF = float("nan"), float("inf")
 POS = [NAN, INF, -INF, 0.0, -1.0]
 BAD = {
-    "material.E": POS,
+    "material.E": POS + [1e160],                 # E h L = 2.5e155 N: forces overflow when squared (traced: inf, SUCCESS)
     "material.nu": [NAN, INF, -1.0, -2.0, 0.5000001],
     "material.thickness": POS,
     "fingers.radius": POS,
@@ -385,6 +385,10 @@ def test_a_force_scale_beyond_the_precision_is_refused(square):
     with pytest.raises(ValueError, match="force scale E \\* thickness \\* size = 2.5.e\\+27 N is too large for float32"):
         api.check_force_scale(op32)
     api.check_force_scale(dataclasses.replace(op32, stiffness=f32(1e5 * 0.0254)))
+    # the same bound under tracing (a traced E of 1e160 gave SUCCESS with an infinite grip force)
+    for eps, Es in ((float(jnp.finfo(jnp.float32).eps), (1e5, 1e20)), (2.2e-16, (1e20, 1e150, 1e160))):
+        rule = jax.jit(lambda E: V.invalid_index(dict(GOOD, eps=eps, **{"material.E": E, "settings.newton_tol": 1e-5})))  # noqa: B023
+        assert [int(rule(E)) for E in Es] == [-1] * (len(Es) - 1) + [V.FIELDS.index("material.E")]
 
 
 def test_a_placement_turned_past_a_right_angle_does_not_grip_through_the_object(square):
