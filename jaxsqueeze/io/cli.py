@@ -6,6 +6,7 @@ import argparse
 import json
 import os
 import sys
+import tempfile
 import time
 
 EPILOG = """\
@@ -166,7 +167,6 @@ def main(argv=None) -> int:
     except ValueError as e:                       # the library's word on bad input
         return _error(str(e))
     except Exception as e:  # noqa: BLE001 - exit 3 with a pointer to the traceback
-        import tempfile
         import traceback
 
         fd, tb_path = tempfile.mkstemp(prefix="jaxsqueeze-traceback-", suffix=".txt")
@@ -210,8 +210,22 @@ def _check_out(out: str) -> None:
         probe = os.path.dirname(probe)
     if probe and not os.path.isdir(probe):
         raise SceneFileError("--out", f"{out} is below {probe}, which is a file, not a folder")
-    if not os.access(probe or ".", os.W_OK | os.X_OK):
-        raise SceneFileError("--out", f"cannot write into {probe}: permission denied")
+    try:             # a real try: permissions do not tell (root, read-only or virtual file systems)
+        os.rmdir(tempfile.mkdtemp(prefix=".jaxsqueeze-probe-", dir=probe or "."))
+    except OSError as e:
+        raise SceneFileError("--out", f"cannot write into {probe or '.'}: {(e.strerror or str(e)).lower()}") from None
+
+
+def _staging(out: str) -> str:
+    """A new temporary folder beside ``out`` (moved there by :func:`_publish` when complete),
+    with the permissions of a folder made under the user's umask (not mkdtemp's 0700)."""
+    parent = os.path.dirname(out)
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)}.tmp-", dir=parent)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)
+    return tmp
 
 
 def _main(args) -> int:
@@ -226,7 +240,7 @@ def _main(args) -> int:
     if not args.out.strip():
         raise scenefile.SceneFileError("--out", "an empty path would name the current folder; give an output "
                                        "folder, e.g. --out results")
-    out = os.path.abspath(args.out)
+    out = os.path.realpath(args.out)      # a link to an earlier output folder: that folder is replaced
     _check_out(out)
     progress.start("meshing", "reading the scene and meshing")
     for opt in ("max_edge", "refine_edge"):
@@ -260,16 +274,13 @@ def _main(args) -> int:
 
 def _plan(spec, out, args, progress) -> int:
     import shutil
-    import tempfile
 
     from ..post.views import json_ready
     from .planning import plan_settings, run_plan
 
     settings = plan_settings(spec.data.get("plan", {}))
     progress.start("plan", "mapping and searching grasps")
-    parent = os.path.dirname(out)
-    os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)}.tmp-", dir=parent)
+    tmp = _staging(out)
     try:
         summary = run_plan(spec.scene, settings, tmp, progress=progress.enabled, plots=not args.no_plots)
         summary["files"] = {k: os.path.join(out, os.path.basename(v)) for k, v in summary["files"].items()}
@@ -303,7 +314,6 @@ def _publish(tmp: str, out: str) -> None:
 
 def _simulate(spec, out, args, progress) -> int:
     import shutil
-    import tempfile
 
     import numpy as np
 
@@ -330,9 +340,7 @@ def _simulate(spec, out, args, progress) -> int:
             if not args.quiet:
                 print(f"warning: {text}", file=sys.stderr)
 
-    parent = os.path.dirname(out)
-    os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)}.tmp-", dir=parent)
+    tmp = _staging(out)
     try:
         paths = {}
         if not args.no_plots:

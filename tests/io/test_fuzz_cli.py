@@ -110,7 +110,30 @@ def test_out_below_a_file_or_not_writable_is_refused_before_work(tmp_path, capsy
             assert "permission denied" in capsys.readouterr().err
         finally:
             ro.chmod(0o700)
+    if os.path.isdir("/proc"):           # writable by its permissions, even for root, yet not a place for files
+        assert cli.main(["run", str(scene), "--out", "/proc/jaxsqueeze-out"]) == 2
+        assert "error: --out: cannot write into /proc" in capsys.readouterr().err
     assert time.perf_counter() - t < 2.0                     # no squeeze ran
+
+
+def test_out_through_a_link_replaces_the_linked_folder_with_the_users_permissions(tmp_path, capsys):
+    """--out a symlink to an earlier output folder: that folder is replaced and the link kept
+    (the link became a real folder, the old outputs left behind with a stray .old link), and
+    the new folder has the permissions of the umask (it was mkdtemp's 0700)."""
+    rc, err, target, _ = _run(tmp_path, BASE, capsys)
+    assert rc == 0, err
+    first = target.stat().st_ino
+    (tmp_path / "link").symlink_to("out")
+    umask = os.umask(0o022)
+    try:
+        rc = cli.main(["run", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "link"), "--no-plots", "-q"])
+    finally:
+        os.umask(umask)
+    assert rc == 0, capsys.readouterr().err
+    assert (tmp_path / "link").is_symlink() and os.readlink(tmp_path / "link") == "out"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "out", "scene.toml"]
+    assert target.stat().st_ino != first and (target / "summary.json").is_file()    # a new folder, in place
+    assert target.stat().st_mode & 0o777 == 0o755
 
 
 def test_mesh_file_text_empty_png_exit_2(tmp_path, capsys):
