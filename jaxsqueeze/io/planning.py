@@ -74,7 +74,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
 
     import jaxsqueeze as jsq
     from ..plan import quality as Q
-    from ..plan.search import check_search, grasp_map, optimize_placement, quality_of
+    from ..plan.search import check_search, grasp_map, grid, optimize_placement, quality_of
     from ..post import plots as figures
     from ..post.maps import plot_grasp_map
     from ..post.views import json_ready
@@ -106,11 +106,16 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
         check_search(opt, settings.steps, settings.starts, None, None)     # before the map, not after it
     except ValueError as e:
         raise ValueError(f"plan.optimizer={settings.optimizer!r}: {e}") from None
+    spacing = settings.spacing or P / 24
+    try:
+        grid(scene, spacing)                    # too many positions or too few, before any work
+    except ValueError as e:
+        raise ValueError(f"plan.spacing: {e}") from None
     op = scene.operator()
     if settings.push >= float(op.length):
         raise ValueError(f"plan.push: expected a push [m] shorter than the object ({float(op.length):.4g} m), "
                          f"got {settings.push}")
-    gmap = grasp_map(scene, name, spacing=settings.spacing or P / 24, op=op, progress=progress)
+    gmap = grasp_map(scene, name, spacing=spacing, op=op, progress=progress)
     found = optimize_placement(scene, name, optimizer=opt, steps=settings.steps, starts=settings.starts,
                                init=gmap.best[:settings.starts] if len(gmap.best) else None, op=op,
                                progress=progress)

@@ -274,8 +274,8 @@ class GraspMap(NamedTuple):
 
 def grid(scene: Scene, spacing=None) -> np.ndarray:
     """(n,) arc lengths [m] spaced evenly around the outer loop (default: the mean boundary
-    edge, i.e. node spacing). ``ValueError`` for a spacing that is not a finite number > 0, or
-    that puts more than 10 positions per boundary node (a map squeezes every pair)."""
+    edge, i.e. node spacing). ``ValueError`` for a spacing that is not a finite number > 0, that
+    puts more than 10 positions per boundary node (a map squeezes every pair), or fewer than 3."""
     P = float(scene.curve().perimeter)
     m = scene.mesh.loops[0] if hasattr(scene.mesh, "loops") else scene.mesh.m
     if spacing is None:
@@ -284,7 +284,10 @@ def grid(scene: Scene, spacing=None) -> np.ndarray:
                                                        and np.isfinite(float(spacing)) and float(spacing) > 0):
         raise ValueError(f"spacing={spacing!r} must be a finite arc length > 0 m (the outer boundary is {P:.4g} m "
                          f"long; the default is its node spacing, {P / m:.3g} m).")
-    n = max(int(round(P / float(spacing))), 3)
+    n = int(round(P / float(spacing)))
+    if n < 3:
+        raise ValueError(f"spacing={float(spacing):.3g} m puts {n} position(s) on the {P:.4g} m outer boundary; a map "
+                         f"needs at least 3: use a spacing of at most {P / 3:.3g} m.")
     if n > 10 * m:
         raise ValueError(f"spacing={float(spacing):.3g} m puts {n} positions on the {P:.4g} m outer boundary, more than "
                          f"10 per boundary node ({m} nodes), and a map squeezes every pair of them; use a spacing of "

@@ -1,6 +1,8 @@
 """``jaxsqueeze plan SCENE.toml --out DIR``: map, search, best grasp, summary; [plan] errors."""
 import json
 
+import pytest
+
 from jaxsqueeze.io import cli
 
 SCENE = """\
@@ -89,6 +91,18 @@ def test_plan_push_longer_than_the_object_is_an_input_error(tmp_path, capsys):
     code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
     err = capsys.readouterr().err
     assert code == 2 and "error: plan.push: expected a push [m] shorter than the object" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("spacing, said", [("1e-7", "more than 10 per boundary node"), ("100.0", "at least 3")])
+def test_plan_spacing_too_fine_or_too_coarse_names_its_key(tmp_path, capsys, spacing, said):
+    """plan.spacing of 1e-7 m said "error: spacing=..." without its key; 100 m was cut to 3
+    positions quietly (no feasible pair, exit 0). Both: exit 2 naming plan.spacing, no work."""
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE.replace("spacing = 0.03", f"spacing = {spacing}"))
+    code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("error: plan.spacing: spacing=") and said in err, err
     assert not (tmp_path / "o").exists()
 
 

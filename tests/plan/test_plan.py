@@ -44,6 +44,8 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
             jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
     with pytest.raises(ValueError, match="more than 10 per boundary node"):
         jsq.grasp_map(ellipse, "squeeze_work", spacing=1e-6)
+    with pytest.raises(ValueError, match=r"spacing=100 m puts 0 position\(s\) .* at least 3"):   # was 3 quietly
+        jsq.grasp_map(ellipse, "squeeze_work", spacing=100.0)
     with pytest.raises(ValueError, match="one placement"):
         jsq.squeeze(ellipse.replace(placement=plan.Placement(s=(0.0, 0.1), angle=(0.1, 0.0))))
     # a search's counts, optimizer and starting candidates (starts=0 said "no feasible placement
