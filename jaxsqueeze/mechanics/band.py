@@ -118,6 +118,10 @@ _FEW = ("a ring of 4 nodes is about 800 times too stiff and one of 8 about 35 % 
         "for a curved outline (the examples use 128)")
 
 
+#: consecutive band points closer than this share of the mean spacing coincide
+COINCIDENT = 1e-6
+
+
 def _check_size(m: int) -> None:
     """Refuse a band of more than :data:`MAX_NODES` nodes before any O(m²) work."""
     if m > MAX_NODES:
@@ -232,16 +236,29 @@ class Band(ByContent):
 
     @classmethod
     def from_curve(cls, xy, width: float = 0.5e-3, height: float = 5e-3) -> "Band":
-        """Band through the closed counterclockwise polyline ``xy`` (m, 2) [m] (no repeated end).
+        """Band through the closed counterclockwise polyline ``xy`` (m, 2) [m] (a last point
+        that repeats the first, to round-off, is dropped).
 
         The points are the nodes and the knots of the periodic arc-length spline that is the
-        band's geometry; use enough of them to resolve the curvature.
+        band's geometry; use enough of them to resolve the curvature. Two consecutive points
+        closer than :data:`COINCIDENT` of the mean spacing are an error (the spline's knots
+        would coincide).
         """
         xy = np.asarray(xy, dtype=np.float64)
+        if xy.ndim == 2 and xy.shape[1:] == (2,) and len(xy) > MIN_NODES and np.all(np.isfinite(xy)):
+            gaps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+            if np.linalg.norm(xy[-1] - xy[0]) <= COINCIDENT * gaps.mean():
+                xy = xy[:-1]                     # the closing point of a sampled closed curve
         _check_size(len(xy))
         if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < MIN_NODES or not np.all(np.isfinite(xy)):
             raise ValueError(f"xy must be a finite (m, 2) array with m >= {MIN_NODES}, got shape {xy.shape}: "
                              f"{_FEW}")
+        gaps = np.linalg.norm(np.roll(xy, -1, axis=0) - xy, axis=1)
+        close = np.flatnonzero(gaps <= COINCIDENT * gaps.mean())
+        if close.size:
+            k = int(close[0])
+            raise ValueError(f"band points {k} and {(k + 1) % len(xy)} coincide ({gaps[k]:.3g} m apart, mean spacing "
+                             f"{gaps.mean():.3g} m; {close.size} such pair(s)): remove the repeated points")
         width, height = _length("width", width), _length("height", height)
         x, y = xy[:, 0], xy[:, 1]
         hit = crossing(xy, (len(xy),))

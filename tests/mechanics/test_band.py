@@ -164,6 +164,19 @@ def test_curves():
         curves.leaf(0.08, 0.04, tip=0.03)
 
 
+def test_a_repeated_closing_point_is_dropped_and_coincident_points_are_named():
+    """A closed curve sampled with its end point (t = 0 .. 1) failed in scipy's spline ("x must
+    be strictly increasing"); two points 4e-14 m apart built a band whose squeeze failed with a
+    bare LinAlgError. The first is the same band; the second an error naming the points."""
+    closed = curves.circle(0.04)(np.linspace(0.0, 1.0, 33))
+    closed[-1] += 1e-17
+    a, b = Band.from_curve(closed), Band.from_curve(closed[:-1])
+    assert a.m == b.m == 32 and np.array_equal(a.points, b.points)
+    twin = np.insert(closed[:-1], 6, closed[5] + [4e-14, 0.0], axis=0)
+    with pytest.raises(ValueError, match=r"band points 5 and 6 coincide \(4e-14 m apart"):
+        Band.from_curve(twin)
+
+
 @pytest.mark.parametrize("args,kw,match", [
     ((4,), {}, "m >= 8, got 4: a ring of 4 nodes is about 800 times too stiff"),
     ((10.5,), {}, "integer number of nodes m >= 8, got 10.5"),
