@@ -130,7 +130,7 @@ def annulus(r_outer, r_inner, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
 
 
 def _positive(x, name) -> float:
-    if isinstance(x, (bool, str, bytes)) or np.ndim(x) != 0:
+    if isinstance(x, (bool, str, bytes, complex)) or np.ndim(x) != 0 or np.iscomplexobj(x):
         raise ValueError(f"{name} must be one positive, finite length in metres; got {x!r}")
     x = float(x)
     if not np.isfinite(x) or x <= 0:
@@ -147,7 +147,10 @@ def _center(center) -> np.ndarray:
 
 def _as_ring(vertices, what) -> np.ndarray:
     """Validated (k, 2) float64 polygon, closing duplicate removed."""
-    v = np.asarray(vertices, dtype=np.float64)
+    try:
+        v = np.asarray(vertices, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} vertices must be (k, 2) numbers [m]; got {vertices!r:.80}") from None
     if v.ndim != 2 or v.shape[1] != 2:
         raise ValueError(f"{what} vertices must have shape (k, 2); got {v.shape}")
     if len(v) > 3 and np.array_equal(v[0], v[-1]):

@@ -295,6 +295,9 @@ def test_refinement_makes_edges_shorter_near_point():
     (lambda: shapes.annulus(0.02, 0.05, 0.01), "r_inner < r_outer"),
     (lambda: shapes.disk(-1.0, 0.1), "radius must be a positive"),
     (lambda: shapes.rectangle(1.0, 1.0, 0.1, refine_near=[[0, 0]], refine_edge=0.5), "must not exceed"),
+    (lambda: shapes.polygon("abc", max_edge=0.1), "outline vertices must be .* numbers"),     # numpy's words before
+    (lambda: shapes.polygon(SQUARE, holes=["x"], max_edge=0.1), "hole 0 vertices must be .* numbers"),
+    (lambda: shapes.rectangle(0.1 + 1j, 0.1, 0.01), "width must be one positive"),            # a TypeError before
 ])
 def test_shape_validation(call, match):
     with pytest.raises(ValueError, match=match):
