@@ -44,8 +44,10 @@ class Fingers:
             r = np.asarray(self.radius, float)
             if not (np.all(np.isfinite(r)) and np.all(r > 0)):
                 raise ValueError(f"Fingers.radius={self.radius!r} must be a finite length > 0 m.")
-        if isinstance(self.rotation, (list, tuple)) and len({np.shape(row) for row in self.rotation}) > 1:
-            raise ValueError(f"Fingers.rotation rows have different lengths {[np.shape(row) for row in self.rotation]}: "
+        rows = [(len(r),) if isinstance(r, (list, tuple)) else np.shape(r) for r in self.rotation] \
+            if isinstance(self.rotation, (list, tuple)) else []      # (no numpy conversion: rows may hold tracers)
+        if len(set(rows)) > 1:
+            raise ValueError(f"Fingers.rotation rows have different lengths {rows}: "
                              "give both fingers k coefficients, padding the shorter polynomial with leading zeros "
                              "(highest power first).")
         if self.rotation is not None and numeric(self.rotation):

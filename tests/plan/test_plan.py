@@ -107,14 +107,19 @@ def test_a_quality_that_is_not_one_finite_number_is_named():
 def test_a_placed_squeeze_deeper_than_its_first_contacts_are_apart_is_invalid(ellipse, square):
     """A placement's first contacts are known only after the approach: a depth beyond their
     distance (0.2 m across a 0.12 m ellipse) squeezed the fingers through each other with
-    SUCCESS. It is INVALID_INPUT in a map, and an eager squeeze raises with the distance
-    (programs shared with the other tests of this module)."""
+    SUCCESS. Across the ellipse's minor axis (0.08 m) a depth of 0.1 m, less than the object's
+    size (0.12 m), is INVALID_INPUT in a map, and an eager squeeze raises with the distance;
+    deeper than the object's size it is refused before the squeeze."""
     P = float(ellipse.curve().perimeter)
-    s = plan.evaluate(ellipse.replace(depth=0.2), [[0.0, P / 2]] * 3, batch="vmap", chunk=3, progress=False)
+    across = [[P / 4, 3 * P / 4]]
+    with pytest.warns(UserWarning, match="50%"):
+        s = plan.evaluate(ellipse.replace(depth=0.1), across * 3, batch="vmap", chunk=3, progress=False)
     assert list(s.status) == [jsq.Status.INVALID_INPUT] * 3 and np.all(s.quality == 0)
+    with pytest.raises(ValueError, match=r"depth = 0.1 m: expected a depth smaller than the distance between the "
+                                         r"fingers' first contacts, 0.07998 m"), pytest.warns(UserWarning, match="50%"):
+        jsq.squeeze(ellipse.replace(depth=0.1, placement=plan.Placement(s=across[0])))
     placed = square.replace(grip=None, placement=plan.Placement(s=square.arc_length(square.grip)))
-    with pytest.raises(ValueError, match=r"depth = 0.2 m: expected a depth smaller than the distance between the "
-                                         r"fingers' first contacts, 0.1 m"):
+    with pytest.raises(ValueError, match=r"depth = 0.2 \(object size 0.1 m\): .* crush"):
         jsq.squeeze(placed.replace(depth=0.2))
     assert jsq.squeeze(placed).outcome == jsq.Status.SUCCESS
 
