@@ -54,6 +54,7 @@ def _points3(mesh):
 def row_point_data(res, mesh, row: int, op=None) -> dict:
     """The point data dict of one recorded row (see the module docstring)."""
     res = views.trimmed(res)
+    mesh = views.check_object(res, mesh)
     r = views.row_index(res, row)
     n = mesh.n
     B = np.asarray(mesh.boundary)

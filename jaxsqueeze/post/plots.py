@@ -75,6 +75,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             nodes), off for a mesh.
     """
     res = views.trimmed(res)
+    mesh = views.check_object(res, mesh)     # (a scene gives its mesh)
     if forces is None:
         forces = _is_band(mesh)
     r = views.row_index(res, row)
@@ -224,6 +225,7 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
     are nodal values (filled: stick, open: slip); lines are cubic splines through them.
     """
     res = views.trimmed(res)
+    mesh = None if mesh is None else views.check_object(res, mesh)
     rows = default_rows(res) if rows is None else [views.row_index(res, r) for r in rows]
     fig = Figure(figsize=(10, 7), dpi=DPI, layout="constrained")
     axs = fig.subplots(2, 2, sharex="col")

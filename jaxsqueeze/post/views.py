@@ -70,19 +70,38 @@ def make_folder(path, what: str = "output folder") -> str:
     return path
 
 
+#: how far [share of the object's size] a grip node of the object may lie from where the result
+#: had it: a result drawn on another object of the same node counts showed fingertips inside it
+SAME_PLACE = 1e-4
+
+
 def check_object(res, obj, what: str = "mesh"):
-    """The mesh or band of ``obj`` (a mesh, band or scene); ValueError unless it has as many
-    boundary nodes as ``res``."""
+    """The mesh or band of ``obj`` (a mesh, band, scene or compliance operator); ValueError
+    unless it is the object ``res`` was computed for: as many boundary (and mesh) nodes, and
+    its grip nodes where the result had them (:func:`grip_positions`, to :data:`SAME_PLACE`)."""
     obj = getattr(obj, "mesh", obj)
+    fix = f"pass the {what} the result was computed for"
     m = len(np.asarray(obj.boundary)) if hasattr(obj, "boundary") else obj.m
     got = np.shape(res.modes)[-1]
     if m != got:
-        raise ValueError(f"the {what} has {m} boundary nodes but the result {got}: pass the {what} the result "
-                         "was computed for")
+        raise ValueError(f"the {what} has {m} boundary nodes but the result {got}: {fix}")
     u = getattr(res, "displacement", None)
     if u is not None and hasattr(obj, "n") and np.shape(u)[0] != obj.n:
-        raise ValueError(f"the {what} has {obj.n} nodes but the result's displacement field {np.shape(u)[0]}: pass "
-                         f"the {what} the result was computed for")
+        raise ValueError(f"the {what} has {obj.n} nodes but the result's displacement field {np.shape(u)[0]}: {fix}")
+    grip = np.asarray(res.grip).reshape(-1)
+    if hasattr(obj, "length"):         # a compliance operator: scaled boundary points, in boundary order
+        if not np.array_equal(np.asarray(obj.nodes), np.asarray(res.nodes)):
+            raise ValueError(f"the {what}'s boundary nodes are not the result's: {fix}")
+        P = np.asarray(obj.points, float) * float(obj.length)
+        at = P[positions(np.asarray(obj.nodes), grip)]
+    else:
+        P = np.asarray(obj.points, float)
+        at = P[np.clip(grip, 0, len(P) - 1)]
+    off = np.linalg.norm(at - grip_positions(res), axis=1)
+    size = float(np.ptp(P, axis=0).max())
+    if np.any(off > SAME_PLACE * size):          # (NaN: a grip node that never touched, nothing to compare)
+        raise ValueError(f"the {what}'s grip nodes {grip.tolist()} lie {np.nanmax(off):.3g} m from where the result "
+                         f"had them: {fix}")
     return obj
 
 
@@ -90,6 +109,8 @@ def row_index(res, row: int) -> int:
     """Non-negative index of ``row`` (negative counts from the end) among the valid rows."""
     res = trimmed(res)
     k = len(np.asarray(res.depth))
+    if isinstance(row, (bool, np.bool_)) or not isinstance(row, (int, np.integer)):
+        raise TypeError(f"row = {row!r}: expected an integer row index (negative counts from the end)")
     r = int(row)
     if not -k <= r < k:
         raise IndexError(f"row {row} out of range: the result has {k} recorded rows")
@@ -234,6 +255,7 @@ def force_profile(res, row: int = -1, finger: int = 0, mesh=None) -> ForceProfil
     node gets a NaN density).
     """
     res = trimmed(res)
+    mesh = None if mesh is None else check_object(res, mesh)
     r = row_index(res, row)
     if finger not in (0, 1):
         raise ValueError(f"finger must be 0 (the still finger) or 1 (the squeezing finger); got {finger!r}")
@@ -368,6 +390,7 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     the row's recorded rigid part g. ``op`` is ``scene.operator()``; it must carry a field map.
     """
     res = trimmed(res)
+    check_object(res, op, "operator")
     from ..mechanics.operator import rigid_modes
 
     if op.field is None:
@@ -411,6 +434,8 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     ``timings`` [s] if given.
     """
     res = trimmed(res)
+    if scene is not None:
+        check_object(res, scene, "scene")
     from ..simulation.status import Status
 
     st = Status(int(res.status))

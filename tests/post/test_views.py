@@ -99,3 +99,35 @@ def test_views_read_the_grip_and_fingers_from_the_result(offset):
     assert s["grip_nodes"] == [int(g) for g in scene.grip]
     assert set(s["total_force"]) == set(s["contact_regions"]) == {"finger0", "finger1"}
     np.testing.assert_allclose(s["total_force"]["finger1"], np.asarray(res.total_force)[-1, 1], rtol=1e-12)
+
+
+def test_views_plots_and_exports_refuse_another_object_of_the_same_node_counts(offset, tmp_path):
+    """A result drawn on another mesh with the same node counts (the square scaled 2x) gave a
+    picture of fingertips inside the object and no error; plot_deformed, the force profiles,
+    the summary and row_displacement failed on a mesh of other counts with numpy's broadcast
+    or index errors. Every one now compares the grip nodes with the result's (plot_deformed
+    takes a scene, as save_all does)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from jaxsqueeze.post import export, plots
+
+    scene, op, res = offset
+    big = scene.replace(mesh=symmetric_square(0.2, 0.02))
+    assert big.mesh.n == scene.mesh.n and big.mesh.m == scene.mesh.m
+    disk = scene.replace(mesh=jsq.shapes.disk(0.05, 0.01), grip=(0, 5))
+    said = r"grip nodes \[\d+, \d+\] lie 0.05\d* m from where the result had them: pass the"
+    for call in (lambda o: plots.plot_deformed(res, o), lambda o: plots.plot_force_profile(res, mesh=o.mesh),
+                 lambda o: views.force_profile(res, mesh=o.mesh), lambda o: views.summary(res, o),
+                 lambda o: export.write_paraview(tmp_path, res, o.mesh), lambda o: plots.save_all(res, o, tmp_path)):
+        with pytest.raises(ValueError, match=said):
+            call(big)
+        with pytest.raises(ValueError, match="boundary nodes but the result"):
+            call(disk)
+    with pytest.raises(ValueError, match=r"operator's grip nodes .* lie"):
+        views.row_displacement(res, big.operator(), -1)
+    assert plots.plot_deformed(res, scene) is not None                  # a scene gives its mesh
+    for row in (5.7, "1", True):                                         # row 5.7 drew row 5
+        with pytest.raises(TypeError, match="expected an integer row index"):
+            plots.plot_deformed(res, scene, row=row)
+    assert views.row_index(res, np.int64(-1)) == len(res.depth) - 1
+    assert views.summary(res, scene)["status"] == "SUCCESS"
