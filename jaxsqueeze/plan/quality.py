@@ -13,8 +13,10 @@ batched result (of ``jax.vmap(squeeze)``) it returns one value per member (:func
   contact node's cone margin sin(φ − ψ) (ψ the angle of its force from the contact normal;
   1 on the axis, 0 on the cone edge, < 0 outside), then for each finger a smooth maximum over
   its contacts (a finger holds while any of its contacts sticks) and a smooth minimum over
-  the two fingers (the grasp holds while both do): −τ log Σ_f exp(−τ log Σ_k exp(m_k/τ) … /τ)
-  with temperature ``tau`` (τ → 0 gives max/min exactly) [–].
+  the two fingers (the grasp holds while both do): −τ log Σ_f exp(−M_f/τ) with
+  M_f = τ log((1/k_f) Σ_k exp(m_k/τ)), temperature ``tau`` (τ → 0 gives min/max exactly) [–].
+  Both smooth forms lie below the exact ones (by at most τ log k_f and τ log 2), so a grasp
+  that failed (a finger's contacts all on the cone edge) is never positive.
 * :func:`adversary_work` — the work the pusher does on the object during the adversary
   phase, W = Σ_k ½ (F_2(k) + F_2(k+1)) · (x_2(k+1) − x_2(k)) [J]: the energy the grasp absorbs
   in resisting the push (Jia, Guo and Lin, IJRR 2014); larger is better.
@@ -31,7 +33,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ..simulation.laws import FREE, cone_margin
+from ..simulation.laws import FREE
 from ..simulation.result import SqueezeResult, norm
 
 
@@ -74,18 +76,33 @@ def grip_force(res: SqueezeResult):
     return norm(jnp.asarray(res.finger_forces)[_squeeze_row(res), 0])
 
 
-def _softmax(x, mask, tau):
+def _softmax(x, mask, tau, mean: bool = False):
+    """τ log Σ exp(x/τ) over ``mask`` (≥ the maximum, by at most τ log k); ``mean``: τ log of the
+    mean instead (≤ the maximum, by at most τ log k)."""
     big = jnp.max(jnp.where(mask, x, -jnp.inf))
     big = jnp.where(jnp.isfinite(big), big, 0.0)
-    return big + tau * jnp.log(jnp.sum(jnp.where(mask, jnp.exp((x - big) / tau), 0.0)) + 1e-300)
+    lse = big + tau * jnp.log(jnp.sum(jnp.where(mask, jnp.exp((x - big) / tau), 0.0)) + 1e-300)
+    return lse - tau * jnp.log(jnp.maximum(jnp.sum(mask), 1)) if mean else lse
 
 
-@per_result
 def slip_margin(res: SqueezeResult, friction, tau: float = 0.01):
-    """() smooth slip margin of the grasp at its last squeeze row (see module docstring).
+    """() smooth slip margin of the grasp at its last squeeze row (see module docstring); (B,)
+    for a batched result.
 
-    ``friction``: the Coulomb μ of the squeeze (``scene.friction``). −1 when a finger has no contact.
+    ``friction``: the Coulomb μ of the squeeze (``scene.friction``); for a batched result one
+    shared μ or (B,), one per member. −1 when a finger has no contact.
     """
+    batch = jnp.shape(res.depth)[:-1]
+    if jnp.ndim(friction) == 0:
+        return per_result(_slip_margin)(res, friction, tau)
+    if len(batch) == 1 and jnp.shape(friction) == batch:
+        return jax.vmap(_slip_margin, in_axes=(0, 0, None))(res, friction, tau)
+    raise ValueError(f"friction of shape {jnp.shape(friction)}: expected one μ, or one per member of a batched "
+                     f"result (shape {batch})" if batch else f"friction of shape {jnp.shape(friction)}: expected one μ "
+                     "for one result")
+
+
+def _slip_margin(res: SqueezeResult, friction, tau):
     r = _squeeze_row(res)
     F = jnp.asarray(res.forces)[r]
     mode, fg = jnp.asarray(res.modes)[r], jnp.asarray(res.finger)[r]
@@ -94,11 +111,12 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01):
     fn = jnp.sum(F * axis, -1)
     ft = axis[:, 0] * F[:, 1] - axis[:, 1] * F[:, 0]
     size = norm(jnp.stack([fn, ft], -1))
-    m = cone_margin(jnp.arctan(jnp.asarray(friction, F.dtype)), fn, ft) / jnp.where(size > 0, size, 1.0)
+    phi = jnp.arctan(jnp.asarray(friction, F.dtype))     # sin(φ − ψ) |f|, exactly 0 on the edge (no CONE_SLACK)
+    m = (jnp.sin(phi) * fn - jnp.cos(phi) * jnp.abs(ft)) / jnp.where(size > 0, size, 1.0)
     per = []
     for f in (0, 1):
         on = (mode > FREE) & (fg == f) & (size > 0)
-        per.append(jnp.where(jnp.any(on), _softmax(m, on, tau), -1.0))
+        per.append(jnp.where(jnp.any(on), _softmax(m, on, tau, mean=True), -1.0))
     per = jnp.stack(per)
     return -_softmax(-per, jnp.ones(2, bool), tau)
 

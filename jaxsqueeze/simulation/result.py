@@ -41,7 +41,8 @@ class EventLog(NamedTuple):
 
     An eager squeeze's log holds its events only. The log of a result from ``jax.jit`` or
     ``squeeze(..., trim=False)`` keeps its fixed capacity (``Settings.max_events`` rows, the
-    first ``result.n_events`` valid): read ``result.trim().events``.
+    first ``result.n_events`` valid; the padding has node, kind and finger -1): read
+    ``result.trim().events``.
     """
 
     depth: jax.Array
@@ -53,9 +54,13 @@ class EventLog(NamedTuple):
         return int(np.shape(self.depth)[0])
 
     def rows(self):
-        """List of (depth [m], node, 'A'..'D', finger 0|1|2) for printing."""
+        """List of (depth [m], node, 'A'..'D', finger 0|1|2) for printing, the valid events
+        only (a padded log's padding is left out); one squeeze's log, not a batch's."""
+        if np.ndim(self.depth) != 1:
+            raise ValueError(f"this event log holds a batch (depth shape {np.shape(self.depth)}): take one squeeze "
+                             "first, e.g. jax.tree.map(lambda a: a[i], result).events.rows()")
         return [(float(d), int(n), EVENT_KINDS[int(k)], int(f))
-                for d, n, k, f in zip(*(np.asarray(a) for a in self))]
+                for d, n, k, f in zip(*(np.asarray(a) for a in self)) if k >= 0]
 
 
 @jax.tree_util.register_dataclass
@@ -228,12 +233,14 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     last = jnp.minimum(rows, k - 1)                  # pad with the last valid row
     pad = lambda a: a[last]  # noqa: E731
     ev_d, ev_n, ev_k, ev_f = st.events
+    n_ev = jnp.minimum(st.n_ev, ev_d.shape[0])
+    ev_n, ev_k, ev_f = (jnp.where(jnp.arange(ev_d.shape[0]) < n_ev, a, -1) for a in (ev_n, ev_k, ev_f))   # padding
     gs = jnp.array([L, L, 1.0], st.g.dtype)
     return SqueezeResult(
         status=st.status, depth=pad(depth) * L, modes=pad(mode), finger=pad(finger), theta=pad(theta),
         forces=pad(F) * Fs, boundary_displacement=pad(u) * L, centres=pad(C) * L, alpha=pad(alpha),
         rigid=pad(g) * gs, events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
-        g=st.g * gs, count=k, n_events=jnp.minimum(st.n_ev, ev_d.shape[0]), nodes=op.nodes,
+        g=st.g * gs, count=k, n_events=n_ev, nodes=op.nodes,
         grip=op.nodes[st.grip], radius=grasp.radius,
         stats=st.stats, invalid=st.invalid, push=pad(push) * L, margin=st.margin,
         squeeze_status=st.squeeze_status, push_work=st.work * Fs * L,

@@ -332,12 +332,29 @@ def test_squeeze_work_is_the_work_of_the_squeezing_finger(square):
 def test_slip_margin_shrinks_as_the_grip_slants(square):
     """Forces along the contact normals give a margin near sin(atan μ); a slanted grip less."""
     mu = 0.5
-    m0 = float(Q.slip_margin(jsq.squeeze(square), mu))
+    res = jsq.squeeze(square)
+    m0 = float(Q.slip_margin(res, mu))
     mesh = square.mesh
     slanted = square.replace(grip=(nearest(mesh, (-0.01, -0.05)), nearest(mesh, (0.01, 0.05))))
     m1 = float(Q.slip_margin(jsq.squeeze(slanted), mu))
-    assert 0.8 * np.sin(np.arctan(mu)) < m0 <= np.sin(np.arctan(mu)) + 0.05
+    assert 0.8 * np.sin(np.arctan(mu)) < m0 <= np.sin(np.arctan(mu))
     assert m1 < m0
+    # the smooth margin lies below the exact one (τ -> 0) by at most τ (log k + log 2); so with
+    # every contact of finger 0 on its cone edge (exact margin 0: the grasp fails) it is not
+    # positive (it was +τ log k: a failed disk squeeze read +0.009)
+    exact = float(Q.slip_margin(res, mu, tau=1e-12))
+    k = int(np.sum((np.asarray(res.modes[-1]) > 0) & (np.asarray(res.finger[-1]) == 0)))
+    assert exact - 0.01 * (np.log(k) + np.log(2)) <= m0 <= exact
+    on = (np.asarray(res.modes[-1]) > 0) & (np.asarray(res.finger[-1]) == 0)
+    ang = np.asarray(res.theta[-1]) + np.asarray(res.alpha[-1])[0]
+    axis, tangent = np.stack([np.cos(ang), np.sin(ang)], -1), np.stack([-np.sin(ang), np.cos(ang)], -1)
+    size, phi = np.linalg.norm(np.asarray(res.forces[-1]), axis=-1), np.arctan(mu)
+    edge = (np.cos(phi) * axis + np.sin(phi) * tangent) * size[:, None]
+    forces = np.array(res.forces)
+    forces[-1][on] = edge[on]
+    failed = dataclasses.replace(res, forces=forces)
+    assert abs(float(Q.slip_margin(failed, mu, tau=1e-12))) < 1e-12
+    assert float(Q.slip_margin(failed, mu)) <= 1e-12
 
 
 def test_symmetric_push_is_resisted_equally_by_both_fingers(square):

@@ -196,10 +196,25 @@ def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
     np.testing.assert_allclose(work[0], quality.squeeze_work(eager), rtol=1e-10)
     np.testing.assert_allclose(force[0], eager.grip_force, rtol=1e-10)
     assert quality.slip_margin(out, slanted.friction).shape == (3,)
+    mus = jnp.array([0.5, 0.4, 0.3])                   # one μ per member (a shape error before)
+    one = [float(quality.slip_margin(jax.tree.map(lambda a: a[k], out), mus[k])) for k in range(3)]
+    np.testing.assert_allclose(quality.slip_margin(out, mus), one, rtol=1e-12)
+    with pytest.raises(ValueError, match=r"friction of shape \(2,\): expected one μ, or one per member"):
+        quality.slip_margin(out, mus[:2])
     # the one-squeeze methods say so (they were "only scalar arrays can be converted")
     for call in (lambda: out.outcome, out.trim, out.raise_for_status):
         with pytest.raises(ValueError, match=r"takes one squeeze, but this result is batched .*pick one lane"):
             call()
+    # the event log of a padded lane lists its events only (its padding read as A events at
+    # depth 0 on node 0), and a batch's log says to take one squeeze (it was numpy's TypeError)
+    lane = jax.tree.map(lambda a: a[0], out)
+    rows, want = lane.events.rows(), eager.events.rows()
+    assert len(lane.events) > int(lane.n_events) == len(rows) == len(want)
+    assert [r[1:] for r in rows] == [r[1:] for r in want]
+    np.testing.assert_allclose([r[0] for r in rows], [r[0] for r in want], rtol=1e-12)
+    assert np.all(np.asarray(lane.events.kind)[int(lane.n_events):] == -1)
+    with pytest.raises(ValueError, match=r"this event log holds a batch .* take one squeeze first"):
+        out.events.rows()
     # and under tracing they, and throw=True, say what to do instead of a ConcretizationTypeError
     with pytest.raises(ValueError, match="throw=True raises on the status, which is traced under jax.jit"):
         jax.jit(lambda d: jsq.squeeze(slanted.replace(depth=d), throw=True).grip_force)(d0)
