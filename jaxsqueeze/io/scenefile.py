@@ -472,7 +472,9 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     # grip → nodes
     from ..simulation.scene import nearest_boundary_node
     if grip_points is not None:
-        grip = tuple(nearest_boundary_node(mesh, p) for p in grip_points)
+        with warnings_module.catch_warnings():        # a tie: _check_grip_points says it in the file's terms
+            warnings_module.simplefilter("ignore")
+            grip = tuple(nearest_boundary_node(mesh, p) for p in grip_points)
         gkey = "grip.points"
         warnings.extend(_check_grip_points(errs, mesh, grip_points, grip))
         if grip[0] == grip[1]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 import weakref
 from dataclasses import dataclass, field
 from typing import Any
@@ -432,10 +433,17 @@ def boundary_curve(obj) -> "boundary.Curve":
 def nearest_boundary_node(obj, xy) -> int:
     """Boundary node of a mesh or band nearest to ``xy`` (2,) in the caller's frame [m]
     (``points + offset``; both :class:`Mesh` and :class:`~jaxsqueeze.band.Band` keep the node
-    centroid at the origin and the caller's frame in ``offset``)."""
+    centroid at the origin and the caller's frame in ``offset``). Warns when two nodes are
+    equally near (a point midway between nodes: which one is taken decides the grip's slant)."""
     xy = np.asarray(xy, float)
     if isinstance(obj, Mesh):
         pts, nodes = obj.points[obj.boundary] + obj.offset, np.asarray(obj.boundary)
     else:
         pts, nodes = obj.points + obj.offset, np.arange(obj.m)
-    return int(nodes[np.argmin(np.linalg.norm(pts - xy, axis=1))])
+    dist = np.linalg.norm(pts - xy, axis=1)
+    k = np.argsort(dist)[:2]
+    if len(k) == 2 and dist[k[1]] - dist[k[0]] <= 1e-6 * dist[k[1]]:      # (the scene files' tie rule)
+        warnings.warn(f"boundary nodes {int(nodes[k[0]])} and {int(nodes[k[1]])} are equally near {xy.tolist()} "
+                      f"({dist[k[0]]:.3g} m), node {int(nodes[k[0]])} is taken; for a node at that point mesh with "
+                      "refine_near=[point] (shapes) or pick the node yourself", stacklevel=2)
+    return int(nodes[k[0]])

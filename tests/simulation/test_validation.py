@@ -192,6 +192,18 @@ def test_scene_values_eager_and_batched(square):
     assert int(g(jnp.array([sc.grip[0]] * 2))) == V.FIELDS.index("grip")
 
 
+def test_nearest_boundary_node_warns_when_two_nodes_are_equally_near(square):
+    """(0, -0.05) lies midway between two nodes of the 20 mm square: which one round-off picks
+    decides whether a 'centred' grip is slanted (11 degrees here, a fifth of the grip force
+    sideways), so it says so; a point on a node says nothing."""
+    import warnings
+    with pytest.warns(UserWarning, match=r"boundary nodes \d+ and \d+ are equally near \[0.0, -0.05\]"):
+        node = jsq.scene.nearest_boundary_node(square, (0.0, -0.05))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert jsq.scene.nearest_boundary_node(square, (square.points + square.offset)[node]) == node
+
+
 def test_a_depth_as_large_as_the_object_is_refused_also_across_a_diagonal(square):
     """A grip across the square's diagonal is 0.14 m apart, so a 0.105 m squeeze passes the
     grip-distance rule; it is deeper than the object is across (0.1 m) and was SUCCESS with
