@@ -32,7 +32,9 @@ start-up.
 from __future__ import annotations
 
 import math
+import numbers
 import os
+import pickle
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -149,9 +151,17 @@ def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None 
     """
     items = list(items)
     n = len(items)
+    for name, v in (("processes", processes), ("chunk", chunk)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1):
+            raise ValueError(f"{name} must be an integer >= 1 (or None), got {v!r}")
     processes = cpu_count() if processes is None else int(processes)
-    if processes < 1:
-        raise ValueError(f"processes must be >= 1, got {processes}")
+    if processes > 1 and n > 1:          # a worker receives fn by name: say so before any worker starts
+        try:
+            pickle.dumps(fn)
+        except Exception as e:  # noqa: BLE001  (lambdas, closures, local functions: PicklingError, AttributeError)
+            raise TypeError(f"map_scenes sends fn to worker processes by name, and {fn!r} cannot be sent ({e}): "
+                            "define it at the top level of a module (not a lambda or a nested function), or "
+                            "use processes=1") from None
     bar = _Progress(n, progress and sys.stderr.isatty())
     if processes == 1 or n <= 1:
         out = []
@@ -162,7 +172,7 @@ def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None 
         return out
 
     processes = min(processes, n)
-    chunk = max(1, math.ceil(n / (4 * processes))) if chunk is None else max(1, int(chunk))
+    chunk = max(1, math.ceil(n / (4 * processes))) if chunk is None else int(chunk)
     tasks = [(k, items[k:k + chunk]) for k in range(0, n, chunk)]
     env = dict(WORKER_ENV)
     if "jax" in sys.modules:                # the workers read the caller's precision at their jax import

@@ -53,6 +53,21 @@ def test_an_item_error_names_the_item():
         map_scenes(_fail_on_three, range(6), processes=2, chunk=2, progress=False, cache=False)
 
 
+@pytest.mark.parametrize("kw", [dict(processes=1.5), dict(processes="2"), dict(processes=0), dict(chunk=0),
+                                dict(chunk=True)], ids=str)
+def test_counts_that_are_not_positive_integers_are_refused(kw):
+    """processes=1.5 ran one worker, "2" two and chunk=0 one item per task: all refused."""
+    with pytest.raises(ValueError, match=r"must be an integer >= 1 \(or None\), got"):
+        map_scenes(_square_and_env, range(4), progress=False, **kw)
+
+
+def test_a_function_workers_cannot_receive_is_named_before_any_worker_starts():
+    """A lambda failed with pickle's bare "Can't pickle local object" from the pool."""
+    with pytest.raises(TypeError, match=r"sends fn to worker processes by name, .* top level of a module"):
+        map_scenes(lambda x: x, range(4), processes=2, progress=False, cache=False)
+    assert map_scenes(lambda x: 2 * x, range(3), processes=1, progress=False) == [0, 2, 4]    # inline needs no pickle
+
+
 def test_squeezes_in_two_processes_equal_inline(tmp_path):
     xs = [0.0, 0.01]
     pooled = map_scenes(_stick_squeeze, xs, processes=2, chunk=1, progress=False, cache=tmp_path / "cache")
