@@ -97,9 +97,8 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01):
         return per_result(_slip_margin)(res, friction, tau)
     if len(batch) == 1 and jnp.shape(friction) == batch:
         return jax.vmap(_slip_margin, in_axes=(0, 0, None))(res, friction, tau)
-    raise ValueError(f"friction of shape {jnp.shape(friction)}: expected one μ, or one per member of a batched "
-                     f"result (shape {batch})" if batch else f"friction of shape {jnp.shape(friction)}: expected one μ "
-                     "for one result")
+    raise ValueError(f"friction of shape {jnp.shape(friction)}: expected one μ" +
+                     (f", or one per member of the batched result (shape {batch})" if batch else " for one result"))
 
 
 def _slip_margin(res: SqueezeResult, friction, tau):

@@ -441,7 +441,7 @@ def nearest_boundary_node(obj, xy) -> int:
     else:
         pts, nodes = obj.points + obj.offset, np.arange(obj.m)
     dist = np.linalg.norm(pts - xy, axis=1)
-    k = np.argsort(dist)[:2]
+    k = np.argsort(dist, kind="stable")[:2]       # (argmin's choice among equals: the first)
     if len(k) == 2 and dist[k[1]] - dist[k[0]] <= 1e-6 * dist[k[1]]:      # (the scene files' tie rule)
         warnings.warn(f"boundary nodes {int(nodes[k[0]])} and {int(nodes[k[1]])} are equally near {xy.tolist()} "
                       f"({dist[k[0]]:.3g} m), node {int(nodes[k[0]])} is taken; for a node at that point mesh with "
