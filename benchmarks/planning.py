@@ -11,8 +11,8 @@
 Quality: squeeze_work (the strain energy stored by squeezing to the same depth, IJRR 2014's
 "stable squeeze"). Writes results/planning.csv and results/planning.png.
 
-    .venv/bin/python benchmarks/planning.py            # ~15-25 min on 2 cores
-    .venv/bin/python benchmarks/planning.py --quick    # one object, ~3 min
+    .venv/bin/python benchmarks/planning.py            # ~1.5 min on 2 cores (2026-12-03)
+    .venv/bin/python benchmarks/planning.py --quick    # one object, well under a minute
 """
 from __future__ import annotations
 
