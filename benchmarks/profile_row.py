@@ -8,7 +8,7 @@ stick/slip, 15 mm). Three parts:
   (``jax.jit(...).lower(...).compile().as_text()``), bucketed by the ``op_name`` metadata:
   the ``init`` and ``squeeze`` named scopes of ``engine.simulate``, and inside the loop body the
   one configuration solve (with its ``jvp``) and the phase branches of ``engine.step``
-  (``switch`` branches 0-3: advance, locate_event, check, prime).
+  (``switch`` branches 0-2: advance + locate_event with apply_event, check, prime).
 * **Compilation by stage.** Each engine stage jitted alone on a representative state (its own
   trace + lower + compile time and HLO size): ``contacts.solve`` and its ``jvp``, ``reconcile``
   with one new contact (the bordering update of the inverse), ``apply_event``, ``finish``,
@@ -68,10 +68,9 @@ def hlo_stats(text: str) -> dict:
 
 SCOPES = [  # (label, regex on op_name), first match wins: the named scopes of engine.step
     ("squeeze loop: the one solve and its jvp", r"squeeze/while/body/solve/"),
-    ("squeeze loop: phase advance (accept or open a bracket)", r"squeeze/while/body/phase/cond/branch_0_fun"),
-    ("squeeze loop: phase locate_event + apply_event", r"squeeze/while/body/phase/cond/branch_1_fun"),
-    ("squeeze loop: phase check (hypothesis, settle)", r"squeeze/while/body/phase/cond/branch_2_fun"),
-    ("squeeze loop: phase prime", r"squeeze/while/body/phase/cond/branch_3_fun"),
+    ("squeeze loop: phases advance + locate_event, apply_event", r"squeeze/while/body/phase/cond/branch_0_fun"),
+    ("squeeze loop: phase check (hypothesis, settle)", r"squeeze/while/body/phase/cond/branch_1_fun"),
+    ("squeeze loop: phase prime", r"squeeze/while/body/phase/cond/branch_2_fun"),
     ("squeeze loop: the phase switch itself", r"squeeze/while/body/phase/"),
     ("squeeze loop: target (the next depth, the event estimate)", r"squeeze/while/body/target/"),
     ("squeeze loop: accept (record the row, status)", r"squeeze/while/body/accept/"),
@@ -97,7 +96,7 @@ def hlo_by_scope(text: str) -> list:
 PARTS = [  # (label, regex on op_name) for executed operations, first match wins
     ("solve: slip-angle Newton loop", r"/solve/.*newton"),
     ("solve: the rest of the configuration solve and its jvp", r"/solve/"),
-    ("phase switch (advance, locate_event + apply_event, check, prime)", r"/phase/"),
+    ("phase switch (advance + locate_event + apply_event, check, prime)", r"/phase/"),
     ("accept (record the row, status)", r"/accept/"),
     ("reconcile (bordering updates of the contact slots)", r"/reconcile/"),
     ("target (the depth of the solve)", r"/target/"),

@@ -68,9 +68,10 @@ def test_step_advances_by_one_step_when_nothing_happens(model, touched):
 def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, touched):
     """One step over the whole depth crosses the first event of the square, a new contact (A):
     ADVANCE opens a bracket, LOCATE shrinks it to the tolerance with the crossing inside,
-    apply_event logs it at one depth inside the bracket and hands CHECK the new contact."""
+    apply_event logs it at one depth inside the bracket and hands CHECK the new contact.
+    (``missed``: the step is a plain one, not the predicted crossing of ``engine.ahead``.)"""
     wide = dataclasses.replace(model, h=model.D)
-    st = _step(wide, touched)
+    st = _step(wide, dataclasses.replace(touched, missed=jnp.asarray(True)))
     assert int(st.phase) == engine.LOCATE and int(st.count) == 1            # nothing accepted
     b = st.bracket
     assert float(b.lo) == 0.0 and float(b.hi) == float(model.D) and np.any(np.asarray(b.e_hi) < 0)
@@ -102,6 +103,61 @@ def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, touc
                                                                   events=touched.events))
     np.testing.assert_array_equal(np.asarray(again.nodes.mode), np.asarray(st.nodes.mode))
     assert float(again.d_star) == float(st.d_star)
+
+
+def _drive(model, st, plain):
+    """Step a state to its end in Python; ``plain``: every ADVANCE a plain step (``missed``)."""
+    while int(st.status) == engine.RUNNING:
+        st = _step(model, dataclasses.replace(st, missed=jnp.asarray(True)) if plain else st)
+    return st
+
+
+def test_predicted_crossings_give_the_located_events_with_fewer_solves(model):
+    """engine.ahead: steps that go a quarter tolerance past the crossing the accepted row's
+    event functions predict close most brackets in the iteration that opens them (no LOCATE
+    solve), and the squeeze is the one of plain steps: the same events at the same depths (to
+    the event tolerance), the same final contact set and forces, fewer solves. (The square
+    gripped slanted, so that events come one at a time: a new contact and a slip.)"""
+    mesh = symmetric_square(0.1, 0.01)
+    grip = (nearest(mesh, (0.01, -0.05)), nearest(mesh, (-0.01, 0.05)))
+    scene = jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.02), grip=grip, friction=0.3,
+                      depth=0.02)
+    op = dataclasses.replace(scene.operator(), field=None)
+    slanted = engine.make_model(op, api.grasp_of(scene, op), api.config_of(scene))
+    touched = _step(slanted, jax.jit(engine.init)(slanted))
+    fast, slow = _drive(slanted, touched, False), _drive(slanted, touched, True)
+    assert int(fast.status) == int(slow.status) == Status.SUCCESS
+    n = int(fast.n_ev)
+    assert n == int(slow.n_ev) >= 2 and set(np.asarray(slow.events[2])[:n].tolist()) == {0, 2}   # A and C
+    for k in (1, 2, 3):
+        np.testing.assert_array_equal(np.asarray(fast.events[k])[:n], np.asarray(slow.events[k])[:n])
+    np.testing.assert_allclose(np.asarray(fast.events[0])[:n], np.asarray(slow.events[0])[:n],
+                               rtol=0, atol=float(slanted.ev_tol))
+    np.testing.assert_array_equal(np.asarray(fast.nodes.mode), np.asarray(slow.nodes.mode))
+    F = np.asarray(slow.F)
+    np.testing.assert_allclose(np.asarray(fast.F), F, rtol=0, atol=1e-9 * np.abs(F).max())
+    fs, ss = fast.stats, slow.stats
+    assert int(fs.events) == int(ss.events) and int(ss.bracket_iters) >= int(ss.events)
+    assert int(fs.bracket_iters) < int(fs.events)             # some events cost no LOCATE solve
+    assert int(fs.solves) < int(ss.solves)
+
+
+def test_a_prediction_that_falls_short_is_a_row_and_the_next_step_is_plain(model, touched):
+    """engine.ahead: event functions that predict a crossing the solve does not find (here one
+    free node's function and rate set to predict a crossing at half a step, while its real gap
+    stays open) give a row at the predicted depth, ``missed`` set; the step after it is d + h,
+    not another prediction, so a function bending away from zero cannot shrink the steps."""
+    mode = np.asarray(touched.nodes.mode)
+    k = int(np.flatnonzero(mode == FREE)[0])
+    h, q = float(model.h), 0.25 * float(model.ev_tol)
+    e = touched.e.at[k].set(0.5 * h)
+    de = touched.de.at[k].set(-1.0)
+    st = _step(model, dataclasses.replace(touched, e=e, de=de))
+    assert int(st.phase) == engine.ADVANCE and int(st.count) == int(touched.count) + 1 and bool(st.missed)
+    np.testing.assert_allclose(float(st.d), 0.5 * h + q, rtol=1e-12)
+    nxt = _step(model, dataclasses.replace(st, e=st.e.at[k].set(0.1 * h), de=st.de.at[k].set(-1.0)))
+    np.testing.assert_allclose(float(nxt.d), float(st.d) + h, rtol=1e-12)
+    assert not bool(nxt.missed)
 
 
 def test_the_bracket_estimate_finds_the_root_of_a_cubic_from_its_ends():
