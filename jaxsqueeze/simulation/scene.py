@@ -367,12 +367,12 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
     """Compliance operator of a mesh or band, with E and thickness applied as a scale.
 
     Solid meshes: the scaled operator depends on ν and the build only, so it is cached per
-    object (weakly: dropping the mesh frees its operators) and per (ν, method), at most
-    ``CACHE_PER_OBJECT`` of them. When ν is being traced (``jax.jvp``/``jacfwd``/``vmap`` over
+    object (weakly: dropping the mesh frees its operators) and per (ν, method, precision: x64
+    on or off), at most ``CACHE_PER_OBJECT`` of them. When ν is being traced (``jax.jvp``/``jacfwd``/``vmap`` over
     ν) the operator is built inside the trace with the differentiable ``"dense"`` build
     (JAX Cholesky), uncached, so derivatives in ν are exact.
 
-    A band (:class:`~jaxsqueeze.band.Band`) is built once per band object: its scaled
+    A band (:class:`~jaxsqueeze.band.Band`) is built once per band object (and precision): its scaled
     compliance ``E h T K^+ T^T`` does not depend on E (nor on nu, which a band does not
     have), so ``method`` and ``material.nu`` are ignored and the stiffness scale is
     ``material.E * material.thickness``. The band's out-of-plane extent is ``band.height``;
@@ -396,7 +396,10 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
     if solid and not is_concrete(material.nu):
         op = compliance(obj, material, "dense")          # differentiable in nu; not cached
     else:
-        key = (float(material.nu), method) if solid else ("band",)
+        # per precision too: an operator built with x64 on is float64 data, which a squeeze run
+        # inside ``jax.enable_x64(False)`` cannot mix with its float32 state (and vice versa)
+        precision = jax.dtypes.canonicalize_dtype(np.float64)
+        key = (float(material.nu), method, precision) if solid else ("band", precision)
         per = _operators.setdefault(obj, {})
         op = per.get(key)
         if op is None:

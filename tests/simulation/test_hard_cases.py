@@ -15,6 +15,7 @@ import subprocess
 import sys
 import textwrap
 
+import jax
 import meshio
 import numpy as np
 import pytest
@@ -519,6 +520,22 @@ def test_float32_demo_squeeze_keeps_its_contact_forces_exact():
     scale = np.abs(F64).max()
     assert np.abs(F32 - F64).max() < 1e-4 * scale
     assert np.abs(F32.sum(0)).max() < 1e-5 * scale          # the fingers' forces balance
+
+
+def test_one_object_squeezed_in_both_precisions_gets_an_operator_of_each():
+    """A process that squeezes an object in float64 and then inside ``jax.enable_x64(False)``
+    (the accuracy benchmark's precision knob) gets a float32 operator there, not the cached
+    float64 one (which crashed the float32 squeeze: float64 columns in a float32 switch), and
+    the float64 one back afterwards."""
+    scene = base_scene()
+    op64 = scene.operator()
+    assert op64.G.dtype == np.float64
+    with jax.enable_x64(False):
+        op32 = scene.operator()
+        assert op32.G.dtype == np.float32 and op32.stiffness.dtype == np.float32
+        np.testing.assert_allclose(np.asarray(op32.G), np.asarray(op64.G), rtol=1e-4, atol=1e-6 * np.abs(op64.G).max())
+    again = scene.operator()
+    assert again.G.dtype == np.float64 and again.G is op64.G
 
 
 # ============================================================================ bad input: API
