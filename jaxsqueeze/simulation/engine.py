@@ -502,7 +502,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
-    contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row). Under Coulomb,
+    contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row); a contact made at
+    d* whose force is rising is joining (d* lies before its touch by up to ``event_tol``), not
+    peeling. Under Coulomb,
     once the new contacts hold, the armed sliding contact whose slip rate is most reversed at
     d* sticks there, a D event (:func:`_reversed`), one per pass. With segment contacts, a free
     node found inside a fingertip (a release that dropped a shear force) is ``unsettled``: the
@@ -546,7 +548,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         theta = jnp.where(stuck, st.slots.spread()(sol.th, ns.theta), theta)
     share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
     held, _ = _per_finger(model, ns.mode, ns.finger)
-    peeled = on & (sol.fn < -share * jnp.max(jnp.abs(sol.F))) & (st.checks < SETTLE_ITERS) & jnp.all(held > 0)
+    # a contact made at this depth pulls at d* when d* lies before its true touch (an event is
+    # located to event_tol); while it is being pressed harder (its force's rate positive) it
+    # is joining, not peeling: letting it go would only make the same A event again at d*
+    joining = st.added & (dsol.fn > 0)
+    peeled = on & ~joining & (sol.fn < -share * jnp.max(jnp.abs(sol.F))) & (st.checks < SETTLE_ITERS) \
+        & jnp.all(held > 0)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled
     # a release that drops a tangential force (full stick: a fingertip that turns drags its

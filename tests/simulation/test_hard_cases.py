@@ -522,6 +522,35 @@ def test_float32_demo_squeeze_keeps_its_contact_forces_exact():
     assert np.abs(F32.sum(0)).max() < 1e-5 * scale          # the fingers' forces balance
 
 
+def test_demo_at_the_widest_event_tolerance_squeezes_like_the_default():
+    """``event_tol`` at its limit, a tenth of the step: an event depth d* may then lie up to that
+    far before the true touch, so a contact made there pulls at d* while its force rises. The
+    peel rule let such a contact go at d*, and the same A event came back at the same depth
+    until the squeeze STALLED at 0.3 mm (the accuracy benchmark's coarsest event_tol). A
+    contact made at d* whose force rate is positive is joining, not peeling: the demo now
+    squeezes to the end, with the default tolerance's final contact set and force to 1e-6,
+    and no contact pulls by more than the location error allows (its stiffness times at most
+    event_tol: below event_tol / depth of the largest force; 4.6e-4 measured, as before the
+    peel rule)."""
+    demo = scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", "foam_square.toml")).scene
+    ref = squeeze_ok(demo)
+    tol = 0.1 * float(demo.depth) / 50                  # a tenth of the default step
+    wide = jsq.squeeze(demo.replace(settings=jsq.Settings(event_tol=tol)))
+    assert wide.outcome == jsq.Status.SUCCESS, wide.outcome.name
+    np.testing.assert_array_equal(np.asarray(wide.modes[-1]), np.asarray(ref.modes[-1]))
+    F, F0 = np.asarray(wide.total_force[-1]), np.asarray(ref.total_force[-1])
+    assert np.abs(F - F0).max() < 1e-6 * np.abs(F0).max()
+    P0 = demo.mesh.points[demo.mesh.boundary]
+    pulls = []
+    for k in range(int(wide.count)):
+        Fk, u, mode, fg, C = (np.asarray(a[k]) for a in (wide.forces, wide.boundary_displacement, wide.modes,
+                                                          wide.finger, wide.centres))
+        on = mode > 0
+        rel = P0 + u - C[np.where(on, fg, 0)]
+        pulls.append(-np.min(np.sum(Fk * rel, 1)[on] / np.linalg.norm(rel[on], axis=1)))
+    assert 0 < max(pulls) < tol / float(demo.depth) * np.abs(np.asarray(wide.forces)).max()
+
+
 def test_one_object_squeezed_in_both_precisions_gets_an_operator_of_each():
     """A process that squeezes an object in float64 and then inside ``jax.enable_x64(False)``
     (the accuracy benchmark's precision knob) gets a float32 operator there, not the cached
