@@ -555,8 +555,9 @@ def test_one_object_squeezed_in_both_precisions_gets_an_operator_of_each():
     """A process that squeezes an object in float64 and then inside ``jax.enable_x64(False)``
     (the accuracy benchmark's precision knob) gets a float32 operator there, not the cached
     float64 one (which crashed the float32 squeeze: float64 columns in a float32 switch), and
-    the float64 one back afterwards."""
-    scene = base_scene()
+    the float64 one back afterwards (a mesh of its own: the cache keeps ``CACHE_PER_OBJECT``
+    operators per object)."""
+    scene = base_scene(mesh=symmetric_square(0.1, 0.01))
     op64 = scene.operator()
     assert op64.G.dtype == np.float64
     with jax.enable_x64(False):
