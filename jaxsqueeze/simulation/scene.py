@@ -171,8 +171,8 @@ class Settings:
     newton_iters: Newton iteration bound, static.
     bisect_iters: iteration bound for locating an event (regula falsi + bisection), static.
     fused: compile the squeeze loop into one CPU kernel (static; default False): the same
-        result, each squeeze ~40 % faster (the foam square: 4.5–4.8 against 7.3–7.7 ms) for
-        ~2.4 s more compile (5.6 against 3.1 s), which pays off from a few hundred squeezes
+        result, each squeeze ~30 % faster (the foam square: 4.4 against 6.1 ms) for ~2.7 s
+        more compile (5.7 against 3.0 s), which pays off from ~1,600 squeezes
         of one object or with the persistent compilation cache. Honoured wherever the
         library compiles the program itself (eager squeezes,
         :func:`~jaxsqueeze.batch.split_vmap` batches, the planner's maps and searches;
