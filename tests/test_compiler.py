@@ -40,6 +40,21 @@ def test_top_level_calls_use_the_options_and_traced_calls_the_plain_jit(fresh_op
     assert f._cache_size() >= 1
 
 
+def test_library_programs_reduce_without_splitting_into_reduce_windows():
+    """``CPU_OPTIONS`` turn XLA's tree-reduction rewriter off: a sum over 122 numbers (the
+    boundary nodes of the foam square) is one reduce in a library program, where plain
+    ``jax.jit`` splits it into a reduce-window and a reduce (two operations, the squeeze loop
+    had 22 such pairs per iteration). The sum is the same."""
+    if ("xla_disable_hlo_passes", "tree_reduction_rewriter") not in compiler.options():
+        pytest.skip("this jaxlib does not take xla_disable_hlo_passes as a compile option")
+    f = compiler.jit(lambda x: jnp.sum(x * x))
+    x = jnp.linspace(0.0, 1.0, 122)
+    tuned = f.lower(x).compile().as_text()
+    plain = jax.jit(lambda x: jnp.sum(x * x)).lower(x).compile().as_text()
+    assert "reduce-window(" in plain and "reduce-window(" not in tuned
+    np.testing.assert_allclose(f(x), np.sum(np.asarray(x) ** 2), rtol=1e-14)
+
+
 def test_an_option_this_jaxlib_rejects_is_left_out(fresh_options):
     if jax.default_backend() == "cpu":   # the others are kept
         fresh_options.setattr(compiler, "CPU_OPTIONS", {"xla_cpu_no_such_option_in_any_jaxlib": True,
