@@ -54,5 +54,10 @@ _ADVICE = {
                              "cannot start (Section I-A), or a placed fingertip (or the adversary's pusher, "
                              "when result.squeeze_status is SUCCESS) cannot touch the object from outside where "
                              "it was placed. Pick nodes more nearly opposite, raise the friction, or place the "
-                             "fingertip (pusher) elsewhere or more nearly along the inward normal."),
+                             "fingertip (pusher) elsewhere or more nearly along the inward normal. A placed "
+                             "fingertip centred between two boundary nodes first touches one of them off its axis "
+                             "and is judged by its own normal there, tilted by about asin(offset / radius): where "
+                             "the node spacing is not small against the radius, refine the mesh near the "
+                             "placement (shapes: refine_near) or centre the fingertip on a node "
+                             "(Placement(s=scene.arc_length(grip)))."),
 }

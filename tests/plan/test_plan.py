@@ -277,6 +277,28 @@ def test_a_placed_fingertip_is_judged_by_its_own_cone():
     assert float(res.margin) < -0.5 and res.status == jsq.Status.INFEASIBLE_GRIP
 
 
+def test_a_fingertip_between_coarse_nodes_touches_one_tilted_and_refining_there_mends_it():
+    """A placed fingertip centred between two boundary nodes first touches one of them off its
+    axis and is judged by its own normal there: on an ellipse (50 x 35 mm) meshed at 12 mm for
+    a 10 mm fingertip, the opposite placement (0, P/2) has its squeezing fingertip touch a node
+    5.8 mm off its axis: its normal there makes 39 degrees with the segment between the
+    contacts, past the 16.7 degree cone of mu = 0.3: infeasible,
+    and INFEASIBLE_GRIP's advice says what to do. Refined to 2 mm near the fingers
+    (refine_near), the same placement touches nodes on its axis: margin atan(0.3)."""
+    from jaxsqueeze.simulation import api, engine
+    margins = []
+    for kw in ({}, dict(refine_near=[[0.05, 0.0], [-0.05, 0.0]], refine_edge=0.002)):
+        mesh = jsq.shapes.ellipse(0.05, 0.035, max_edge=0.012, **kw)
+        sc = jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.01), friction=0.3, depth=0.006,
+                       placement=plan.Placement(s=(0.0, 0.1)))
+        sc = sc.replace(placement=plan.Placement(s=(0.0, float(sc.curve().perimeter) / 2)))
+        margin = jax.jit(lambda o, sc=sc: engine.make_model(o, api.grasp_of(sc, o), api.config_of(sc)).margin)
+        margins.append(float(margin(sc.operator())))
+    assert margins[0] < np.arctan(0.3) - np.radians(35)
+    assert margins[1] == pytest.approx(np.arctan(0.3), abs=1e-5)
+    assert "refine_near" in jsq.Status.INFEASIBLE_GRIP.advice
+
+
 @pytest.mark.parametrize("s, angle, what", [((0.2047, 0.4498), -0.2135, "slips between nodes, through the object"),
                                             ((0.0632, 0.2451), -0.00135, "both fingers onto one node")])
 def test_a_fingertip_narrower_than_the_mesh_never_squeezes_through_the_object(s, angle, what):
