@@ -55,6 +55,32 @@ def test_library_programs_reduce_without_splitting_into_reduce_windows():
     np.testing.assert_allclose(f(x), np.sum(np.asarray(x) ** 2), rtol=1e-14)
 
 
+def test_library_programs_copy_fewer_buffers_around_conditionals_in_loops():
+    """``CPU_OPTIONS`` turn on copy insertion's region analysis: a loop whose body switches
+    among three branches that update or pass on three arrays (the squeeze loop's shape: the
+    phase switch) compiles with half the copies, and computes the same."""
+    key = ("xla_cpu_copy_insertion_use_region_analysis", True)
+    if key not in compiler.options():
+        pytest.skip("this jaxlib does not take xla_cpu_copy_insertion_use_region_analysis")
+
+    def run(x):
+        def body(s):
+            i, ev, x, y = s
+            branches = [lambda ev, x, y: (ev.at[i % 256].set(x[0]), x * 1.01, y),
+                        lambda ev, x, y: (ev, x + 1.0, y), lambda ev, x, y: (ev, x, y + 1.0)]
+            ev, x, y = lax.switch(i % 3, branches, ev, x, y)
+            return i + 1, ev, lax.cond(x[1] > 3.0, lambda: x * 2.0, lambda: x), y
+        return lax.while_loop(lambda s: s[0] < 100, body, (jnp.int32(0), jnp.zeros(256), x, jnp.zeros(122)))
+
+    x = jnp.linspace(0.0, 1.0, 122)
+    without = dict(opt for opt in compiler.options() if opt != key)
+    copies = lambda c: c.as_text().count(" copy(")   # noqa: E731
+    tuned, plain = compiler.jit(run).lower(x).compile(), jax.jit(run, compiler_options=without).lower(x).compile()
+    assert copies(tuned) < 0.75 * copies(plain)
+    for a, b in zip(tuned(x), plain(x)):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_an_option_this_jaxlib_rejects_is_left_out(fresh_options):
     if jax.default_backend() == "cpu":   # the others are kept
         fresh_options.setattr(compiler, "CPU_OPTIONS", {"xla_cpu_no_such_option_in_any_jaxlib": True,

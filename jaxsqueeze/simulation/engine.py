@@ -474,13 +474,16 @@ def apply_event(model: Model, st: State) -> State:
 def _log(model: Model, st: State, flag, kinds, finger, d):
     """The event log with the events of the nodes ``flag`` (m,) appended (kinds and fingers
     (m,), all at depth d), their count, and the fault (EVENT_OVERFLOW past ``max_events``)."""
+    # a gather, not a scatter: log entry n_ev + k takes the (k+1)-th flagged node (XLA:CPU runs
+    # a scatter as a loop, one dispatch per node, once copy insertion puts copies in it)
     E = model.cfg.max_events
-    order = jnp.cumsum(flag) - 1 + st.n_ev
-    slot = jnp.where(flag & (order < E), order, E)
+    count = jnp.cumsum(flag.astype(jnp.int32))              # (m,) flagged nodes up to each node
+    k = jnp.arange(E, dtype=jnp.int32) - st.n_ev             # (E,) rank of an entry among the new ones
+    new = (k >= 0) & (k < count[-1])
+    src = jnp.searchsorted(count, k + 1).clip(0, flag.shape[0] - 1)
     ev_d, ev_n, ev_k, ev_f = st.events
-    events = (ev_d.at[slot].set(d, mode="drop"), ev_n.at[slot].set(model.op.nodes.astype(jnp.int32), mode="drop"),
-              ev_k.at[slot].set(kinds.astype(jnp.int32), mode="drop"),
-              ev_f.at[slot].set(finger.astype(jnp.int32), mode="drop"))
+    events = (jnp.where(new, d, ev_d), jnp.where(new, model.op.nodes.astype(jnp.int32)[src], ev_n),
+              jnp.where(new, kinds.astype(jnp.int32)[src], ev_k), jnp.where(new, finger.astype(jnp.int32)[src], ev_f))
     n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
     return events, n_ev, jnp.where(n_ev > E, Status.EVENT_OVERFLOW, st.fault).astype(jnp.int32)
 

@@ -184,6 +184,37 @@ def test_the_bracket_estimate_finds_the_root_of_a_cubic_from_its_ends():
     assert np.isnan(r[0]) and np.isnan(r[1]) and abs(r[2] - roots[2]) < 1e-12
 
 
+def test_the_event_log_appends_flagged_nodes_in_order_and_drops_past_its_end():
+    """``_log`` appends the flagged nodes' events in node order after the ``n_ev`` logged ones
+    (a gather since 2026-12-04; it was a scatter), leaves every other entry alone, and past
+    ``max_events`` drops the rest and raises EVENT_OVERFLOW: against a plain loop, for random
+    flags at offsets 0, mid-log, at the end and past it."""
+    import types
+    m, E = 9, 12
+    nodes = np.arange(100, 100 + m)
+    model = types.SimpleNamespace(cfg=types.SimpleNamespace(max_events=E), op=types.SimpleNamespace(nodes=jnp.asarray(nodes)))
+    rng = np.random.default_rng(3)
+    state = lambda events, n_ev: types.SimpleNamespace(events=events, n_ev=n_ev, fault=jnp.int32(engine.RUNNING))  # noqa: E731
+    log = jax.jit(lambda events, n_ev, *flags: engine._log(model, state(events, n_ev), *flags, 0.5))
+    for n_ev in (0, 5, 10, 12, 14):
+        for _ in range(3):
+            flag, kinds, finger = rng.random(m) < 0.4, rng.integers(0, 4, m), rng.integers(0, 2, m)
+            old = (rng.random(E), rng.integers(0, 99, E), rng.integers(0, 9, E), rng.integers(0, 9, E))
+            events, count, fault = log(tuple(jnp.asarray(a) for a in old), jnp.int32(n_ev), jnp.asarray(flag),
+                                       jnp.asarray(kinds), jnp.asarray(finger))
+            want = [np.array(a) for a in old]
+            pos = n_ev
+            for i in np.flatnonzero(flag):
+                if pos < E:
+                    for a, v in zip(want, (0.5, nodes[i], kinds[i], finger[i])):
+                        a[pos] = v
+                pos += 1
+            for got, w in zip(events, want):
+                np.testing.assert_array_equal(np.asarray(got), w)
+            assert int(count) == n_ev + flag.sum()
+            assert int(fault) == (Status.EVENT_OVERFLOW if n_ev + flag.sum() > E else engine.RUNNING)
+
+
 def test_finish_decides_the_status_in_one_order(model, touched):
     fin = jax.jit(engine.finish)
     ns = touched.nodes
