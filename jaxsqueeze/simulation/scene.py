@@ -171,8 +171,8 @@ class Settings:
     newton_iters: Newton iteration bound, static.
     bisect_iters: iteration bound for locating an event (regula falsi + bisection), static.
     fused: compile the squeeze loop into one CPU kernel (static; default False): the same
-        result, each squeeze ~35 % faster (the foam square: 3.6 against 5.5 ms) for ~1.8 s
-        more compile (4.2 against 2.5 s), which pays off from ~900 squeezes
+        result, each squeeze ~35 % faster (the foam square: 3.4 against 5.3 ms) for ~1.9 s
+        more compile (4.5 against 2.5 s), which pays off from ~1,000 squeezes
         of one object or with the persistent compilation cache. Honoured wherever the
         library compiles the program itself (eager squeezes,
         :func:`~jaxsqueeze.batch.split_vmap` batches, the planner's maps and searches;
