@@ -282,9 +282,9 @@ def test_a_fingertip_between_coarse_nodes_touches_one_tilted_and_refining_there_
     axis and is judged by its own normal there: on an ellipse (50 x 35 mm) meshed at 12 mm for
     a 10 mm fingertip, the opposite placement (0, P/2) has its squeezing fingertip touch a node
     5.8 mm off its axis: its normal there makes 39 degrees with the segment between the
-    contacts, past the 16.7 degree cone of mu = 0.3: infeasible,
-    and INFEASIBLE_GRIP's advice says what to do. Refined to 2 mm near the fingers
-    (refine_near), the same placement touches nodes on its axis: margin atan(0.3)."""
+    contacts, past the 16.7 degree cone of mu = 0.3: infeasible, and INFEASIBLE_GRIP's advice
+    says what to do. Refined to 2 mm near the fingers (refine_near), the same placement
+    touches nodes on its axis: margin atan(0.3)."""
     from jaxsqueeze.simulation import api, engine
     margins = []
     for kw in ({}, dict(refine_near=[[0.05, 0.0], [-0.05, 0.0]], refine_edge=0.002)):
