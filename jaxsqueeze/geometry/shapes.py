@@ -12,7 +12,9 @@ interior edge is about ``max_edge`` (a 0.1 m square with ``max_edge=0.004`` has 
 Where the object is thinner than about ``max_edge``, Triangle cannot keep its angles without
 boundary nodes it may not add: a mesh with angles under :data:`MIN_ANGLE` (20 degrees, less
 at sharp outline corners) is refused with the thickness to use (one sliver across a 2 mm
-strip made a squeeze 20x too stiff).
+strip made a squeeze 20x too stiff). A finest edge length larger than the object itself
+(``max_edge``, or ``refine_edge`` where refined) warns: that mesh is little more than the
+outline's vertices, most often a length in millimetres among metres.
 
 Local refinement. With ``refine_near`` (k, 2) points, the target edge length becomes
 
@@ -32,6 +34,7 @@ estimate and a hint about mixed units, above ``MAX_ELEMENTS`` (a setting: assign
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 import triangle as tr
@@ -71,10 +74,11 @@ def polygon(vertices, holes=(), max_edge=None, refine_near=None, refine_edge=Non
     outer = _as_ring(vertices, "outline")
     inner = [_as_ring(hole, f"hole {i}") for i, hole in enumerate(holes)]
     _check_rings(outer, inner)
+    size = np.ptp(outer, axis=0).max()
     _guard(abs(_ring_area(outer)) - sum(abs(_ring_area(v)) for v in inner),
-           sum(_perimeter(r) for r in [outer, *inner]), np.ptp(outer, axis=0).max(), h)
+           sum(_perimeter(r) for r in [outer, *inner]), size, h)
     rings = [_sample_polyline(outer, h)] + [_sample_polyline(v, h) for v in inner]
-    return _mesh_rings(rings, [_interior_point(v) for v in inner], h)
+    return _checked(_mesh_rings(rings, [_interior_point(v) for v in inner], h), size, h)
 
 
 def rectangle(width, height, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
@@ -107,7 +111,7 @@ def ellipse(a, b, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
     a, b = _positive(a, "a"), _positive(b, "b")
     _guard(np.pi * a * b, 2 * np.pi * max(a, b), 2 * max(a, b), h)
     ring = _sample_ellipse(c, a, b, h)
-    return _mesh_rings([ring], [], h)
+    return _checked(_mesh_rings([ring], [], h), 2 * max(a, b), h)
 
 
 def annulus(r_outer, r_inner, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
@@ -123,7 +127,7 @@ def annulus(r_outer, r_inner, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
     c = _center(center)
     _guard(np.pi * (ro ** 2 - ri ** 2), 2 * np.pi * (ro + ri), 2 * ro, h)
     rings = [_sample_ellipse(c, ro, ro, h), _sample_ellipse(c, ri, ri, h)]
-    return _mesh_rings(rings, [c], h)
+    return _checked(_mesh_rings(rings, [c], h), 2 * ro, h)
 
 
 # ----------------------------------------------------------------------------- validation
@@ -309,6 +313,28 @@ def _guard(area, perimeter, size, h):
                          + f" on an object of area {area:.3g} m^2 would make about {n:.3g} triangles, more than "
                          f"the limit of {MAX_ELEMENTS:,} (jaxsqueeze.geometry.shapes.MAX_ELEMENTS, env "
                          f"JAXSQUEEZE_MAX_ELEMENTS); use a larger max_edge." + hint)
+
+
+def _checked(mesh: Mesh, size, h) -> Mesh:
+    """``mesh``, with a warning when the finest edge length asked for exceeds the object's
+    ``size`` [m]: its mesh is little more than its outline's vertices (a 0.1 m square at
+    max_edge=1 is 2 triangles)."""
+    if h.min_edge > size:
+        name = "refine_edge" if h.refined else "max_edge"
+        warnings.warn(f"{name} = {h.min_edge:g} m exceeds the object ({size:g} m across), so its mesh is little "
+                      "more than the outline's vertices and a squeeze of it means little; use edges of a few "
+                      "percent of the object's size. Every length is in metres (a length in millimetres is 1000 "
+                      "times too large)", stacklevel=_caller_level())
+    return mesh
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` of the first frame outside this module (a warning names the user's line)."""
+    import sys
+    f, level = sys._getframe(1), 1
+    while f is not None and f.f_globals.get("__name__") == __name__:
+        f, level = f.f_back, level + 1
+    return level
 
 
 def _perimeter(ring) -> float:

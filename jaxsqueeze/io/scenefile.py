@@ -466,7 +466,10 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
                                                     s0.max_steps, s0.max_events, dtype):
                         errs.add(SceneFileError(_cost_key(msg), msg + " (estimated before meshing)"))
             if not errs.errors:
-                mesh = errs.run(_object, tables["object"], base, grip_points, (max_edge, refine_edge))
+                made = errs.run(_object, tables["object"], base, grip_points, (max_edge, refine_edge))
+                if not _bad(made):
+                    mesh, said = made
+                    warnings.extend(said)
     errs.raise_if_any()                                   # everything below needs all of the above
 
     # grip → nodes
@@ -677,6 +680,7 @@ def _band(obj, height, overrides=(None, None)):
 
 
 def _object(obj, base, grip_points, overrides=(None, None)):
+    """(mesh, warnings) of the object table (a built-in shape or a mesh file)."""
     from ..geometry import shapes
     from ..geometry.mesh import read_mesh
 
@@ -698,7 +702,7 @@ def _object(obj, base, grip_points, overrides=(None, None)):
         if not os.path.exists(path):
             raise SceneFileError("object.mesh_file", f"no such file: {path}")
         try:
-            return read_mesh(path)
+            return read_mesh(path), []
         except ValueError as e:
             raise SceneFileError("object.mesh_file", str(e)) from None
         except Exception as e:  # meshio's own read errors (unknown format, corrupt file)
@@ -706,7 +710,10 @@ def _object(obj, base, grip_points, overrides=(None, None)):
 
     shape, args, kw, names = _shape_args(obj, grip_points, overrides)
     try:
-        return getattr(shapes, shape)(*args, **kw)
+        with warnings_module.catch_warnings(record=True) as caught:   # scene-file warnings are the spec's
+            warnings_module.simplefilter("always")
+            mesh = getattr(shapes, shape)(*args, **kw)
+        return mesh, [f"{_wrap(ValueError(str(w.message)), 'object', names).key}: {w.message}" for w in caught]
     except ValueError as e:
         raise _wrap(e, "object", names) from None
 

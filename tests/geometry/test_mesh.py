@@ -1,4 +1,6 @@
 """Mesh container, validation, boundary loops, I/O and built-in shapes (Section II)."""
+import warnings
+
 import meshio
 import numpy as np
 import pytest
@@ -235,6 +237,22 @@ def test_a_max_edge_coarser_than_the_object_is_thin_is_refused(make, coarse, thi
     with pytest.raises(ValueError, match=rf"max_edge = .* too coarse .* about {thin:g} m thin .* max_edge <= {thin:g} m"):
         make(coarse)
     assert make(thin).min_angle() > 30.0
+
+
+def test_an_edge_length_larger_than_the_object_warns():
+    """max_edge = 1 m on a 0.1 m square (a length in mm among metres, or a typo) made its 4
+    corners and 2 triangles, which squeezed to SUCCESS without a word. It warns, naming the
+    length that decides the mesh (refine_edge where the grip zone is refined); a fine
+    refined zone under a max_edge larger than the object grades down and says nothing."""
+    with pytest.warns(UserWarning, match=r"max_edge = 1 m exceeds the object \(0.1 m across\)") as said:
+        m = shapes.rectangle(0.1, 0.1, max_edge=1.0)
+    assert m.n == 4 and said[0].filename == __file__           # the warning names the caller's line
+    with pytest.warns(UserWarning, match=r"refine_edge = 0.25 m exceeds the object \(0.1 m across\)"):
+        shapes.rectangle(0.1, 0.1, max_edge=1.0, refine_near=[[0.0, 0.05]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert shapes.rectangle(0.1, 0.1, max_edge=1.0, refine_near=[[0.0, 0.05]], refine_edge=0.004).n > 100
+        shapes.rectangle(0.1, 0.1, max_edge=0.05)
 
 
 def test_a_sharp_corner_is_not_taken_for_a_thin_object():

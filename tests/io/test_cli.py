@@ -5,6 +5,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 
 import meshio
 import numpy as np
@@ -210,6 +211,18 @@ def test_a_grip_point_midway_between_two_nodes_warns():
     assert not scenefile.load_text(text.replace("0.008", "0.01")).warnings          # a node at x = 0
     for name in ("foam_square", "heart_band", "leaf_band"):
         assert not scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", f"{name}.toml")).warnings, name
+
+
+def test_a_max_edge_larger_than_the_object_warns_under_its_key():
+    """The shape's warning is the scene file's, under object.max_edge (the CLI prints it as a
+    warning: line and writes it to summary.json), not a Python warning from the library."""
+    text = ('[object]\nshape = "rectangle"\nwidth = 0.1\nheight = 0.1\nmax_edge = 1.0\n[material]\nE = 1e5\n'
+            "nu = 0.3\nthickness = 0.0254\n[fingers]\nradius = 0.01\n[grip]\nnodes = [0, 2]\n"
+            "[squeeze]\ndepth = 0.005\nfriction = 0.5\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        said = scenefile.load_text(text).warnings
+    assert len(said) == 1 and said[0].startswith("object.max_edge: max_edge = 1 m exceeds the object"), said
 
 
 def test_grip_nodes_of_a_mesh_file_with_unused_nodes_are_refused(tmp_path):
