@@ -262,7 +262,7 @@ def main(argv=None):
     model = model_fn(op0, gr)
     d1 = jnp.minimum(srow.d + model.h, model.D)
     adv = dataclasses.replace(srow, phase=jnp.asarray(E.ADVANCE, jnp.int32), status=jnp.asarray(E.RUNNING, jnp.int32))
-    solve = lambda o, g, sr, d: contacts.solve(model_fn(o, g), sr.slots, sr.nodes, d, sr.hold)  # noqa: E731
+    solve = lambda o, g, sr, d: contacts.solve(model_fn(o, g), sr.slots, sr.nodes, d)  # noqa: E731
     s1 = jax.jit(solve)(op0, gr, srow, d1)
     # one free node joins (what reconcile does after an event A): the nearest free node to a contact
     free = np.flatnonzero(modes[k] == FREE)

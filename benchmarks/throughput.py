@@ -369,7 +369,7 @@ def main(argv=None):
     d1 = jax.numpy.minimum(srow.d + model.h, model.D)
     inp = row_inputs(op0, gr, cfg, srow, d1)
     t_ref, ref = reference_row(inp, reps=max(20, 4 * a.reps))
-    one = jax.jit(lambda o, g, sr, d: contacts.solve(E.make_model(o, g, cfg), sr.slots, sr.nodes, d, sr.hold))
+    one = jax.jit(lambda o, g, sr, d: contacts.solve(E.make_model(o, g, cfg), sr.slots, sr.nodes, d))
     s1 = jax.block_until_ready(one(op0, gr, srow, d1))
     t_one, _ = best_of(lambda: jax.block_until_ready(one(op0, gr, srow, d1)), max(20, 4 * a.reps))
     idx = np.flatnonzero(modes[k] > 0)

@@ -286,7 +286,6 @@ class Solution(NamedTuple):
     rate: (m,) slip rate s·dθ/dε of sliding nodes (0 elsewhere).
     gap: (m,) gap of every node to its nearest fingertip.
     iters: () Newton iterations; resid: () last Newton update [rad].
-    drift: (2,) the rigid drift across the squeeze line and spin ĝ⊥ (frictionless; else 0).
     """
 
     th: jax.Array
@@ -303,7 +302,6 @@ class Solution(NamedTuple):
     gap: jax.Array
     iters: jax.Array
     resid: jax.Array
-    drift: jax.Array
 
 
 class _View(NamedTuple):
@@ -347,9 +345,9 @@ def _block_form(sl: Slots, sel):
     return sl.Minv[dofs[:, None], dofs[None, :]].reshape(Q, 2, Q, 2)
 
 
-def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
+def _slip_angles(model: Model, sl: Slots, v: _View, d):
     """Slot angles θ (S,): anchors for sticking slots, system S (eq. 6) for sliding ones, by
-    Newton. Returns (θ, ok, iterations, last update, dθ/dε (S,), ĝ⊥ (2,)).
+    Newton. Returns (θ, ok, iterations, last update, dθ/dε (S,)).
 
     Newton's Jacobian is assembled from ``jax.jacobian`` of the per-slot laws by the chain rule
     through the exact linear map f = P p (O(S²) instead of S forward passes through P):
@@ -362,11 +360,11 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
     the stationary point of the strain energy E(θ) over the contact angles; where the object's
     position is indeterminate (a drift along flat faces, a disk's spin) E is flat or, with
     material points pinned to the tips, slightly concave, and the stated rule holds it: the
-    stationary point of E + ½ ε |ĝ⊥ − ``hold``|², ĝ⊥ the rigid drift across the squeeze line
-    and the spin of the motion (the least-squares rigid fit of the boundary displacement),
-    ``hold`` its value where the contact set last changed or a row was accepted (a weak spring
-    re-anchored there, so a node that joins feels no force from it),
-    ε = ``NEUTRAL_REG`` × the mean contact stiffness (``docs/numerics.md`` §5.1).
+    stationary point of E + ½ ε |ĝ⊥|², ĝ⊥ the rigid drift across the squeeze line and the spin
+    of the boundary displacement since the first touch (its least-squares rigid fit), and
+    ε = ``NEUTRAL_REG`` × the mean contact stiffness: a spring anchored at the touch, stiff
+    against the drift mode's negative stiffness (``docs/numerics.md`` §5.1). ĝ⊥ is continuous
+    at a contact change (a node joins unloaded), so a joining node feels no jump from it.
 
     The unknowns are only the sliding slots: gathered into ``Config.sliding`` positions (one
     system; more sliding slots stop the squeeze with an overflow), or with ``sliding = 0`` into
@@ -378,7 +376,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
     sliding = v.active & (v.mode >= SLIP_POS)
     zero = jnp.zeros((), v.theta0.dtype)
     if cfg.friction_model == "stick":
-        return v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0), jnp.zeros(2, zero.dtype)
+        return v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0)
     held = cfg.friction_model == "frictionless"
 
     def prescribed_k(th, c, r, a):
@@ -408,7 +406,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             return put(x, v.theta0)
 
         @jax.jit     # traced once: the Newton loop, the implicit step and the rates reuse it
-        def system(x, m, sl, v, dd, Psel, K, eps, hold, ix):
+        def system(x, m, sl, v, dd, Psel, K, eps, ix):
             """(R (Q,), J (Q, Q)) of system S at the unknowns x; ix = (sel, mask, back, on)."""
             sel, mask, back, on = ix
             take = lambda a: jnp.take(a, sel, axis=0, mode="clip")  # noqa: E731
@@ -425,8 +423,8 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             dp = jax.vmap(jax.jacobian(prescribed_k))(th, C, r, a)                          # (Q, 2)
             dlf, dlt = jax.vmap(jax.jacobian(law_k, argnums=(0, 1)))(f, th, a, sign, phi)   # (Q, 2), (Q,)
             J = jnp.einsum("ka,kajb,jb->kj", dlf, Psel, dp) + jnp.diag(dlt)
-            if held:      # the gradient of ½ ε |ĝ⊥ − hold|² over r·θ, added to the tangential balance
-                g = jnp.einsum("gkb,kb->g", K, p) - hold
+            if held:      # the gradient of ½ ε |ĝ⊥|² over r·θ, added to the tangential balance
+                g = jnp.einsum("gkb,kb->g", K, p)
                 Ks = jnp.take(K, sel, axis=1, mode="clip")
                 H = jnp.einsum("gkb,kb->gk", Ks, dp)
                 d2p = jax.vmap(jax.jacobian(jax.jacobian(prescribed_k)))(th, C, r, a)
@@ -437,7 +435,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             return R, jnp.where(mask[:, None], J, 0.0) + jnp.diag(jnp.where(mask, 0.0, 1.0))
 
         Psel = _block_form(sl, sel)
-        args = (model, sl, v, d, Psel, K, eps, hold, (sel, mask, back, on))
+        args = (model, sl, v, d, Psel, K, eps, (sel, mask, back, on))
         consts = lax.stop_gradient(args)
         tol = consts[0].newton_tol
 
@@ -467,17 +465,10 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d, hold):
             _, J_t = system(_value_and_tangent(x_c, x), *args)
             _, R_eps = jax.jvp(lambda dd: system(x, *args[:3], dd, *args[4:])[0], (d,), (jnp.ones_like(d),))
             rate = put(-linalg.solve(J_t, R_eps))
-        th = angles(x, v)
-        drift = jnp.zeros(2, zero.dtype)
-        if held:
-            C, r, a = model.centres(d)[v.finger], model.r[v.finger], model.angles(d)[v.finger]
-            p = jnp.where(v.active[:, None], jax.vmap(prescribed_k)(th, C, r, a) - model.op.points[v.idx], 0.0)
-            drift = jnp.einsum("gkb,kb->g", K, p)
-        return th, last <= tol, it, last, rate, drift
+        return angles(x, v), last <= tol, it, last, rate
 
     n = jnp.sum(sliding)
-    still = lambda: (v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0),  # noqa: E731
-                     jnp.zeros(2, zero.dtype))
+    still = lambda: (v.theta0, jnp.array(True), jnp.array(0, jnp.int32), zero, jnp.zeros_like(v.theta0))  # noqa: E731
     full = lambda: solve_for(jnp.arange(S), sliding, jnp.arange(S), sliding)  # noqa: E731
 
     def compact(Q):
@@ -503,7 +494,7 @@ def _value_and_tangent_jvp(primals, tangents):
     return primals[0], tangents[1]
 
 
-def solve(model: Model, sl: Slots, ns: Nodes, d, hold=None) -> Solution:
+def solve(model: Model, sl: Slots, ns: Nodes, d) -> Solution:
     """Solve the configuration (slots, per-node state) at depth ``d`` and evaluate every event
     function (Section IV-B):
 
@@ -520,8 +511,7 @@ def solve(model: Model, sl: Slots, ns: Nodes, d, hold=None) -> Solution:
     r = model.r[v.finger]
     rate = jnp.zeros_like(v.theta0)
     iters, resid, ok = jnp.array(0, jnp.int32), jnp.zeros((), v.theta0.dtype), jnp.array(True)
-    hold = jnp.zeros(2, v.theta0.dtype) if hold is None else hold
-    th, ok, iters, resid, rate, drift = _slip_angles(model, sl, v, d, hold)
+    th, ok, iters, resid, rate = _slip_angles(model, sl, v, d)
     axis = unit(th + alpha)                # cone axis: from the tip centre to the node
     p = C + r[:, None] * axis - op.points[v.idx]
     f, g = _linear(model, sl, v, p)
@@ -552,4 +542,4 @@ def solve(model: Model, sl: Slots, ns: Nodes, d, hold=None) -> Solution:
     kind = put(k_slot.astype(jnp.int32))
     e = jnp.where((ns.mode == FREE) | (kind > 0), e, jnp.inf)
     del S
-    return Solution(th, f, g, ok, u, F, e, kind, put(fn), put(ft), put(srate), gaps, iters, resid, drift)
+    return Solution(th, f, g, ok, u, F, e, kind, put(fn), put(ft), put(srate), gaps, iters, resid)

@@ -105,8 +105,6 @@ class Bracket(NamedTuple):
     dth: jax.Array
     x: jax.Array        # (m, 2) deformed boundary at hi and its rate
     dx: jax.Array
-    drift: jax.Array    # (2,) frictionless drift and spin at hi and its rate
-    ddrift: jax.Array
     iters: jax.Array
 
 
@@ -124,7 +122,6 @@ class State:
     g: jax.Array            # (3,)
     e: jax.Array            # (m,) accepted event functions and their rates in d
     de: jax.Array
-    hold: jax.Array         # (2,) where the frictionless rule holds drift and spin (contacts.solve)
     phase: jax.Array        # ADVANCE, LOCATE, CHECK or PRIME
     bracket: Bracket
     d_star: jax.Array       # the depth CHECK solves at
@@ -155,7 +152,7 @@ def _with(st: State, **kw) -> State:
 
 def _solve(model: Model, st: State, d):
     """The one configuration solve of a loop iteration, and its rate in d (``jax.jvp``)."""
-    return jax.jvp(lambda dd: contacts.solve(model, st.slots, st.nodes, dd, st.hold), (d,), (jnp.ones_like(d),))
+    return jax.jvp(lambda dd: contacts.solve(model, st.slots, st.nodes, dd), (d,), (jnp.ones_like(d),))
 
 
 def _finger_totals(model: Model, F, mode, finger):
@@ -190,12 +187,10 @@ def init(model: Model) -> State:
     i32 = lambda v: jnp.array(v, jnp.int32)  # noqa: E731
     zero = z((), dt)
     zm, zm2 = z(m, dt), z((m, 2), dt)
-    bracket = Bracket(zm, zero, zero, zm, zm, zm, zm, z(m, jnp.int32), zm, z(S, dt), z(S, dt), zm2, zm2, z(2, dt), z(2, dt),
-                      i32(0))
+    bracket = Bracket(zm, zero, zero, zm, zm, zm, zm, z(m, jnp.int32), zm, z(S, dt), z(S, dt), zm2, zm2, i32(0))
     fault = jnp.where(model.invalid >= 0, Status.INVALID_INPUT, jnp.where(model.margin < 0, Status.INFEASIBLE_GRIP, RUNNING))
     return State(
         d=zero, nodes=nodes, slots=contacts.pair(op, S, i, j), angle=theta, F=zm2, u=zm2, g=z(3, dt), e=zm, de=zm,
-        hold=z(2, dt),
         phase=i32(CHECK), bracket=bracket, d_star=zero, added=added, checks=i32(0), before=z(m, jnp.int32),
         status=i32(RUNNING), fault=jnp.asarray(fault, jnp.int32), n_ev=i32(0),
         events=(z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
@@ -331,7 +326,7 @@ def advance(model: Model, st: State, sol: Solution, dsol: Solution, d1):
     floor = jnp.minimum(st.e, 0.0)
     crossed = jnp.any(sol.e < floor)
     b = Bracket(floor, st.d, d1, st.e - floor, st.de, sol.e - floor, dsol.e, sol.kind, sol.ft, sol.th, dsol.th,
-                model.op.points + sol.u, dsol.u, sol.drift, dsol.drift, jnp.array(0, jnp.int32))
+                model.op.points + sol.u, dsol.u, jnp.array(0, jnp.int32))
     s = st.stats
     opened = _with(st, bracket=b, phase=jnp.array(LOCATE, jnp.int32), stats=s._replace(events=s.events + 1),
                    missed=jnp.array(0, jnp.int32))
@@ -419,8 +414,8 @@ def locate_event(model: Model, st: State, sol: Solution, dsol: Solution, dm) -> 
     e = sol.e - b.floor
     hit = jnp.any(e < 0)
     sel = lambda new, old: jax.tree.map(lambda a, c: jnp.where(hit, a, c), new, old)  # noqa: E731
-    hi_part = sel((dm, e, dsol.e, sol.kind, sol.ft, sol.th, dsol.th, model.op.points + sol.u, dsol.u, sol.drift,
-                   dsol.drift), (b.hi, b.e_hi, b.de_hi, b.kind, b.ft, b.th, b.dth, b.x, b.dx, b.drift, b.ddrift))
+    hi_part = sel((dm, e, dsol.e, sol.kind, sol.ft, sol.th, dsol.th, model.op.points + sol.u, dsol.u),
+                  (b.hi, b.e_hi, b.de_hi, b.kind, b.ft, b.th, b.dth, b.x, b.dx))
     lo_part = jax.tree.map(lambda a, c: jnp.where(hit, c, a), (dm, e, dsol.e), (b.lo, b.e_lo, b.de_lo))
     b = Bracket(b.floor, lo_part[0], hi_part[0], lo_part[1], lo_part[2], *hi_part[1:], b.iters + 1)
     return _with(st, bracket=b, stats=st.stats._replace(bracket_iters=st.stats.bracket_iters + 1))

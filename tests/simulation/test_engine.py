@@ -175,7 +175,7 @@ def test_the_bracket_estimate_finds_the_root_of_a_cubic_from_its_ends():
     de = lambda d: -(1.0 + 3.0 * (d - 0.4) ** 2) - 6.0 * (d - roots) * (d - 0.4)  # noqa: E731
     z = jnp.zeros(3)
     b = engine.Bracket(z, jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(e(lo)), jnp.asarray(de(lo)),
-                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z, z, z,
+                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z,
                        jnp.asarray(0, jnp.int32))
     np.testing.assert_allclose(np.asarray(engine._hermite_root(b)), roots, rtol=0, atol=1e-12)
     # a function already below zero at lo, or still above it at hi, has no crossing to estimate
@@ -358,7 +358,7 @@ def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
     back to the modes from before the event would repeat forever: STALLED (a fault that finish
     reports first), never a loop. The same pass with the depth moved on is accepted as a row."""
     st = _step(model, touched)                                        # a row at d = h, phase ADVANCE
-    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d, s.hold),
+    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
                                               (s.d,), (jnp.ones_like(s.d),)))(model, st)
     undone = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
                                  added=jnp.zeros_like(st.added), checks=jnp.asarray(0, jnp.int32))
