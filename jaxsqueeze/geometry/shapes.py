@@ -34,6 +34,7 @@ estimate and a hint about mixed units, above ``MAX_ELEMENTS`` (a setting: assign
 from __future__ import annotations
 
 import os
+import sys
 import warnings
 
 import numpy as np
@@ -330,7 +331,6 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
 
 def _caller_level() -> int:
     """The ``stacklevel`` of the first frame outside this module (a warning names the user's line)."""
-    import sys
     f, level = sys._getframe(1), 1
     while f is not None and f.f_globals.get("__name__") == __name__:
         f, level = f.f_back, level + 1
