@@ -406,11 +406,14 @@ def check_search(optimizer, steps, starts, budget, init) -> None:
     if optimizer is not None:
         u = jnp.zeros(3)
         try:                                   # one step as the search takes it: (gradient, state, params)
-            optimizer.update(u, optimizer.init(u), u)
+            step, _ = optimizer.update(jnp.ones(3), optimizer.init(u), u)
         except TypeError as e:
             raise ValueError(f"the optimizer cannot take a step from a gradient alone ({e}); optimizers with a "
                              "line search (optax.lbfgs, ...) evaluate the quality themselves, which this search "
                              "does not support: use optax.adam, optax.sgd, optax.adabelief, ...") from None
+        if not np.all(np.isfinite(np.asarray(step))):
+            raise ValueError(f"the optimizer's step from a unit gradient is {np.asarray(step).tolist()}, not "
+                             "finite: check its learning rate (a finite number > 0, e.g. optax.adam(0.02))")
     if init is not None:
         candidates(init, "init")
 

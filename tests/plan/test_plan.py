@@ -60,6 +60,11 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     import optax        # a line search needs the value inside optax: it failed there, deep in optax's update
     with pytest.raises(ValueError, match=r"cannot take a step from a gradient alone .*optax.lbfgs, ...\) evaluate"):
         jsq.optimize_placement(ellipse, "squeeze_work", optimizer=optax.lbfgs(), progress=False)
+    # a NaN or infinite learning rate made every step non-finite: each was undone and the search
+    # returned its start as the best, silently
+    for lr in (float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="not finite: check its learning rate"):
+            jsq.optimize_placement(ellipse, "squeeze_work", optimizer=optax.sgd(lr), progress=False)
     # a map's chunk, keep, processes and angle (chunk=0 looped forever, keep=-1 dropped the
     # last best candidate, a NaN angle squeezed NaN placements); a zero coarse spacing of a
     # search silently became the default
