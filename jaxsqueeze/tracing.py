@@ -1,5 +1,8 @@
-"""Is a value a concrete array or a tracer inside ``jit``/``vmap``/``jvp``? (the base layer)."""
+"""Is a value a concrete array or a tracer inside ``jit``/``vmap``/``jvp``? And which frame is
+the user's (for a warning's ``stacklevel``)? (the base layer)"""
 from __future__ import annotations
+
+import sys
 
 import jax
 import numpy as np
@@ -8,6 +11,15 @@ import numpy as np
 def is_concrete(x) -> bool:
     """True unless ``x`` (or any leaf of it) is a JAX tracer, i.e. eager validation can read it."""
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(x))
+
+
+def caller_level() -> int:
+    """The ``stacklevel`` for ``warnings.warn`` called here that names the first frame outside
+    the jaxsqueeze package: the user's line that asked for what the warning is about."""
+    f, level = sys._getframe(1), 1
+    while f is not None and f.f_globals.get("__name__", "").partition(".")[0] == __name__.partition(".")[0]:
+        f, level = f.f_back, level + 1
+    return level
 
 
 def as_array(x, dtype=None) -> jax.Array:

@@ -34,12 +34,12 @@ estimate and a hint about mixed units, above ``MAX_ELEMENTS`` (a setting: assign
 from __future__ import annotations
 
 import os
-import sys
 import warnings
 
 import numpy as np
 import triangle as tr
 
+from ..tracing import caller_level
 from .mesh import Mesh
 
 AREA_FACTOR = 1.5
@@ -325,16 +325,8 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
         warnings.warn(f"{name} = {h.min_edge:g} m exceeds the object ({size:g} m across), so its mesh is little "
                       "more than the outline's vertices and a squeeze of it means little; use edges of a few "
                       "percent of the object's size. Every length is in metres (a length in millimetres is 1000 "
-                      "times too large)", stacklevel=_caller_level())
+                      "times too large)", stacklevel=caller_level())
     return mesh
-
-
-def _caller_level() -> int:
-    """The ``stacklevel`` of the first frame outside this module (a warning names the user's line)."""
-    f, level = sys._getframe(1), 1
-    while f is not None and f.f_globals.get("__name__") == __name__:
-        f, level = f.f_back, level + 1
-    return level
 
 
 def _perimeter(ring) -> float:

@@ -67,8 +67,42 @@ def test_thin_ring_diametral_load_converges():
     assert abs(dv / ((2 / np.pi - 0.5) * R**3 / (E * I)) - 1) < 1e-2
 
 
+def test_a_thin_wall_does_not_lock():
+    """Membrane locking: with the full membrane strain a ring of 32 nodes was 62 % too stiff at
+    w/R = 1e-5 (and 3 % at 1e-4); with the assumed linear strain every wall from 0.1 R to
+    1e-5 R is within 1e-5 and 3e-5 of the closed form for the two diameters."""
+    R, h, E, m = 1.0, 0.1, 1.0, 32
+    for w in (1e-1, 1e-3, 1e-4, 1e-5):
+        I, A = h * w**3 / 12, w * h
+        short = (np.pi / 4 - 2 / np.pi) * R**3 / (E * I) + np.pi / 4 * R / (E * A)
+        long = (2 / np.pi - 0.5) * R**3 / (E * I) - R / (2 * E * A)
+        dh, dv = _ring_diameters(m, R, w, h, E)
+        assert abs(-dh / short - 1) < 1e-5 and abs(dv / long - 1) < 3e-5, w      # 6.9e-6, 2.1e-5 at w = 1e-3
+
+
+def test_a_wall_too_thin_for_float64_warns_then_is_refused():
+    """Round-off grows as (m l / w)^2: a 4 cm ring of 32 nodes warns at a 0.1 um wall (bound
+    0.016, still 3e-6 off the closed form) and is refused at 10 nm (bound 1.6); a squeeze of
+    the heart with such a bound ended in a wrong SLIP_FAILURE."""
+    import warnings
+    ring = lambda w: Band.from_function(curves.circle(0.04), 32, width=w)      # noqa: E731
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        band_compliance(ring(1e-6), 2e9)                                        # bound 1.6e-4: quiet
+    with pytest.warns(UserWarning, match=r"band width = 1e-07 m with m = 32 nodes .* round-off can reach 0.016 ") as said:
+        band_compliance(ring(1e-7), 2e9)
+    assert said[0].filename == __file__
+    with pytest.raises(ValueError, match=r"band width = 1e-08 m .* no digit of the result is assured; check that "
+                                         r"the width is the wall thickness in metres"):
+        band_compliance(ring(1e-8), 2e9)
+
+
 def test_straight_element_is_euler_bernoulli_beam():
-    """kappa = 0: transverse block = EB beam element, axial block = cubic-Hermite bar (EA/l on ends)."""
+    """kappa = 0: transverse block = EB beam element, axial block = the cubic-Hermite bar with its
+    strain u' projected onto linear functions (the assumed membrane strain): on [0, 1],
+    u' = (u2 - u1) / l + (theta1 - theta2) (1/2 - xi) + (a Legendre P2 part, dropped), so the
+    energy is EA/l (u2 - u1)^2 + EA l / 12 (theta1 - theta2)^2 (the full cubic bar's K is
+    EA/(30 l) [[36, 3l, -36, 3l], ...]). A constant axial force is still exact."""
     l, EA, EI = 0.3, 7.0, 2.0
     xi = (np.polynomial.legendre.leggauss(NQ)[0] + 1) / 2
     d1 = np.zeros((1, NQ, 2)); d1[..., 0] = 1.0
@@ -78,14 +112,15 @@ def test_straight_element_is_euler_bernoulli_beam():
     iy, ix = [1, 3, 5, 7], [0, 2, 4, 6]
     assert np.allclose(ke[np.ix_(iy, iy)], beam, rtol=1e-12, atol=0)
     assert np.allclose(ke[np.ix_(ix, iy)], 0.0, atol=1e-14)
-    bar = EA / (30 * l) * np.array([[36, 3 * l, -36, 3 * l], [3 * l, 4 * l**2, -3 * l, -l**2],
-                                    [-36, -3 * l, 36, -3 * l], [3 * l, -l**2, -3 * l, 4 * l**2]])
-    assert np.allclose(ke[np.ix_(ix, ix)], bar, rtol=1e-12, atol=0)
+    bar = EA / l * np.array([[1, 0, -1, 0], [0, l**2 / 12, 0, -l**2 / 12],
+                             [-1, 0, 1, 0], [0, -l**2 / 12, 0, l**2 / 12]])
+    assert np.allclose(ke[np.ix_(ix, ix)], bar, rtol=1e-12, atol=1e-14 * EA / l)
     assert xi.shape == (NQ,)
 
 
 def test_heart_and_leaf_converge():
-    """Pinch compliance of the cookie-cutter outlines: m = 64 within 2% of m = 256."""
+    """Pinch compliance of the cookie-cutter outlines: m = 64 within 5e-4 of m = 256 (measured
+    1.4e-4 and 1.5e-4; 2.2e-3 and 1.5e-3 before the membrane strain was projected)."""
     for curve in (curves.heart(), curves.leaf()):
         vals = []
         for m in (64, 256):
@@ -98,7 +133,7 @@ def test_heart_and_leaf_converge():
             f[2 * i:2 * i + 2], f[2 * j:2 * j + 2] = d, -d
             u = (G @ f).reshape(-1, 2)
             vals.append((u[j] - u[i]) @ d)
-        assert vals[0] < 0 and abs(vals[0] / vals[1] - 1) < 2e-2
+        assert vals[0] < 0 and abs(vals[0] / vals[1] - 1) < 5e-4
 
 
 def test_compliance_operator_ring():
