@@ -325,17 +325,17 @@ def _simulate(spec, out, args, progress) -> int:
     scene = spec.scene
     progress.start("operator", f"building the compliance operator ({scene.mesh.n} nodes, "
                    f"{len(scene.boundary_nodes())} on the boundary)")
-    op = scene.operator()
-    progress.start("squeeze", "compiling + squeezing")
     import warnings
     with warnings.catch_warnings(record=True) as caught:     # the library's warnings, as warning: lines
         warnings.simplefilter("always")
+        op = scene.operator()
+        progress.start("squeeze", "compiling + squeezing")
         res = squeeze(scene)
     progress.done()
     said = list(spec.warnings)
     for w in caught:
         text = str(w.message)
-        if text not in said:
+        if not any(w.endswith(text) for w in said):          # the scene file's own, under its key
             said.append(text)
             if not args.quiet:
                 print(f"warning: {text}", file=sys.stderr)

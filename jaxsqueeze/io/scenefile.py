@@ -654,6 +654,8 @@ def _band(obj, height, overrides=(None, None)):
     """A :class:`~jaxsqueeze.band.Band` from an ``[object]`` table with ``band = ...``."""
     from ..geometry import curves
     from ..mechanics.band import Band
+    from ..mechanics.material import Material
+    from ..simulation.scene import compliance_of
 
     _unknown("object", obj, set(BAND_KEYS))
     for k, required in BAND_KEYS.items():
@@ -673,6 +675,7 @@ def _band(obj, height, overrides=(None, None)):
         with warnings_module.catch_warnings(record=True) as caught:   # scene-file warnings are the spec's
             warnings_module.simplefilter("always")
             band = Band.from_function(curve, m, width=width, height=height)
+            compliance_of(band, Material(1.0, 0.3, band.height))     # cached; checks the round-off
         return band, [f"object.width: {w.message}" for w in caught]
     except ValueError as e:
         raise _wrap(e, "object", {r"width": "object.width", r"height": "object.height",

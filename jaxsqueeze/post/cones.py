@@ -179,7 +179,7 @@ def _band_rotations(band, E, res):
     from ..mechanics.band import band_pinv, band_stiffness
 
     K = band_stiffness(band, E)
-    X = band_pinv(band, K)
+    X = band_pinv(band, K, check=False)             # checked where the squeeze built the operator
     T = band.to_xy()
     F = np.asarray(res.forces, float).reshape(len(np.asarray(res.depth)), -1)       # (k, 2m)
     dofs = (X @ (T.T @ F.T)).T                                                   # (k, 4m)

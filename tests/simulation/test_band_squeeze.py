@@ -248,6 +248,16 @@ def test_band_scene_file_warns_of_a_wall_thicker_than_its_curvature_radius():
     assert not scenefile.load_text(BAND_SCENE).warnings
 
 
+def test_band_scene_file_says_a_wall_too_thin_for_float64_under_its_key():
+    """The 4 cm ring of 32 nodes: round-off can reach 0.016 of its compliance at a 0.1 um wall
+    (a warning under object.width); at 10 nm (1.6) it is refused there, before any squeeze."""
+    said = scenefile.load_text(BAND_SCENE.replace("nodes = 32", "nodes = 32\nwidth = 1e-7")).warnings
+    assert len(said) == 1 and said[0].startswith("object.width: band width = 1e-07 m with m = 32 nodes") \
+        and "round-off can reach 0.016 " in said[0], said
+    with pytest.raises(scenefile.SceneFileError, match=r"object.width: band width = 1e-08 m .* no digit"):
+        scenefile.load_text(BAND_SCENE.replace("nodes = 32", "nodes = 32\nwidth = 1e-8"))
+
+
 def test_band_scene_rejects_mesh_size_options(tmp_path, capsys):
     assert cli.main(["run", _path("heart"), "--out", str(tmp_path / "o"), "--max-edge", "0.01"]) == 2
     assert capsys.readouterr().err.startswith("error: --max-edge: ")
@@ -364,12 +374,18 @@ def test_placement_search_runs_on_a_band(runs):
 def test_cli_says_the_library_warnings_as_warning_lines(tmp_path, capsys):
     """A squeeze deeper than half the band: the library's UserWarning reached the terminal as a
     raw Python warning with a source line; the CLI prints it as one ``warning:`` line (once)
-    and keeps it in summary.json."""
+    and keeps it in summary.json. A wall so thin that round-off can reach 0.2 of the compliance:
+    said once, under object.width, though the run builds the operator again in float64."""
     path = tmp_path / "deep.toml"
-    path.write_text(open(_path("heart")).read().replace("relative_depth = 0.10", "relative_depth = 0.6"))
+    path.write_text(open(_path("heart")).read().replace("relative_depth = 0.10", "relative_depth = 0.6").replace(
+        "width = 0.0005 ", "width = 1e-7 "))
     out = tmp_path / "out"
     cli.main(["run", str(path), "--out", str(out), "--no-plots"])
     err = capsys.readouterr().err
     lines = [ln for ln in err.splitlines() if "more than 50% of the object" in ln]
     assert len(lines) == 1 and lines[0].startswith("warning: depth = ") and "UserWarning" not in err
-    assert any("more than 50%" in w for w in json.loads((out / "summary.json").read_text())["warnings"])
+    said = json.loads((out / "summary.json").read_text())["warnings"]
+    assert any("more than 50%" in w for w in said)
+    thin = [ln for ln in err.splitlines() if "round-off can reach" in ln]
+    assert len(thin) == 1 and thin[0].startswith("warning: object.width: band width = 1e-07 m"), err
+    assert sum("round-off can reach" in w for w in said) == 1, said
