@@ -102,7 +102,11 @@ def arclength_params(curve: Curve, m: int, dense: int | None = None) -> np.ndarr
     """
     n = max(64 * m, 8192) if dense is None else int(dense)
     p = np.arange(n + 1) / n
-    xy = curve(p)
+    xy = np.asarray(curve(p), dtype=np.float64)
+    if xy.shape != (n + 1, 2) or not np.all(np.isfinite(xy)):
+        what = f"shape {xy.shape}" if xy.shape != (n + 1, 2) else "points that are not finite"
+        raise ValueError(f"the curve maps k parameters in [0, 1] to finite (k, 2) points [m]; for {n + 1} it "
+                         f"gave {what}")
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
     return np.interp(np.arange(m) / m * s[-1], s, p)
 

@@ -265,6 +265,9 @@ class Band(ByContent):
                 xy = xy[:-1]                     # the closing point of a sampled closed curve
         _check_size(len(xy))
         if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < MIN_NODES or not np.all(np.isfinite(xy)):
+            if xy.ndim == 2 and xy.shape[1] == 2 and xy.shape[0] >= MIN_NODES:
+                k = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
+                raise ValueError(f"xy (m, 2) must be finite: point {k} is {xy[k].tolist()}")
             raise ValueError(f"xy must be a finite (m, 2) array with m >= {MIN_NODES}, got shape {xy.shape}: "
                              f"{_FEW}")
         gaps = np.linalg.norm(np.roll(xy, -1, axis=0) - xy, axis=1)
@@ -280,8 +283,10 @@ class Band(ByContent):
             a, b = ([k, (k + 1) % len(xy)] for k in hit)
             raise ValueError(f"the band curve crosses itself: segment {a} crosses segment {b} (point indices); "
                              "order the points along the curve")
-        if 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) <= 0:
-            raise ValueError("the band curve must run counterclockwise (positive signed area)")
+        area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
+        if area <= 1e-12 * np.sum(gaps) ** 2:
+            raise ValueError("the band curve encloses no area (its points lie on a line)" if area > -1e-12 * np.sum(
+                gaps) ** 2 else "the band curve must run counterclockwise (positive signed area): reverse the points")
         cs, u, period = _spline(xy)
         m = u.shape[0]
         du = np.diff(np.append(u, period))

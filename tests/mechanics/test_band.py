@@ -189,8 +189,20 @@ def test_curves():
     d1, d2 = (x[2] - x[0]) / (2 * dp), (x[2] - 2 * x[1] + x[0]) / dp**2
     assert np.isclose((d1[0] * d2[1] - d1[1] * d2[0]) / np.linalg.norm(d1) ** 3, 500.0, rtol=1e-4)
     assert curves.heart()(np.array([0.0])).shape == (1, 2)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"must run counterclockwise .*: reverse the points"):
         Band.from_curve(curves.sample(curves.circle(0.04), 32)[::-1])
+    # a line, a NaN point and a curve function of the wrong shape: were "must run
+    # counterclockwise", a hint about too few nodes, and numpy's AxisError
+    with pytest.raises(ValueError, match=r"encloses no area \(its points lie on a line\)"):
+        Band.from_curve(np.c_[np.linspace(0.0, 1.0, 20), np.zeros(20)])
+    nan = curves.sample(curves.circle(0.04), 32)
+    nan[7, 1] = np.nan
+    with pytest.raises(ValueError, match=r"xy \(m, 2\) must be finite: point 7 is \[.*, nan\]"):
+        Band.from_curve(nan)
+    with pytest.raises(ValueError, match=r"the curve maps k parameters .* to finite \(k, 2\) points .* gave shape \(8193,\)"):
+        Band.from_function(lambda p: np.cos(p), 32)
+    with pytest.raises(ValueError, match=r"for 8193 it gave points that are not finite"):
+        Band.from_function(lambda p: np.c_[np.cos(p), np.where(p < 0.5, p, np.inf)], 32)
     twisted = curves.sample(curves.circle(0.04), 32)
     twisted[[10, 11]] = twisted[[11, 10]]                      # two points out of order
     with pytest.raises(ValueError, match=r"crosses itself: segment \[9, 10\] crosses segment \[11, 12\]"):
