@@ -46,15 +46,17 @@ long: a 1 m ring of 32 nodes with a 10 um wall was 62 % too stiff, and the 8 cm 
 nodes 1.1 % at 10 um and 17 % at 0.1 um. Projected, the ring is within 1e-5 of the closed
 form at every wall from 0.1 m to 10 um and the heart within 1e-4. On a straight element the
 axial block is then EA/l (u2 - u1)^2 + EA l / 12 (theta1 - theta2)^2 (a constant force is
-exact), and the rigid motions still have zero strain. Why Cartesian rather than (alpha, beta) Hermite: a rigid rotation
-z x (gamma - c) is itself a cubic in u on each element, so all three rigid motions lie in the
-element space EXACTLY and have zero energy to round-off (no projection needed, no
-dkappa/ds from spline third derivatives), and the inextensible bending modes are
-approximated far better: an (alpha, beta)-Hermite version of this element was 3x too stiff
-for the heart at m = 128 (membrane locking where the curvature varies fast); this one, with
-the projected membrane strain, has the heart's pinch compliance within 2e-4 of m = 512 at
-m = 64 (2e-3 without the projection). beta needs C1 (zeta holds beta''); Cartesian C1 with the C2 spline
-gives C1 alpha and beta. The node xy displacement is read off directly (``Band.to_xy``);
+exact), and the rigid motions still have zero strain.
+
+Why Cartesian rather than (alpha, beta) Hermite: a rigid rotation z x (gamma - c) is itself a
+cubic in u on each element, so all three rigid motions lie in the element space EXACTLY and
+have zero energy to round-off (no projection needed, no dkappa/ds from spline third
+derivatives), and the inextensible bending modes are approximated far better: an
+(alpha, beta)-Hermite version of this element was 3x too stiff for the heart at m = 128
+(membrane locking where the curvature varies fast); this one, with the projected membrane
+strain, has the heart's pinch compliance within 2e-4 of m = 512 at m = 64 (2e-3 without the
+projection). beta needs C1 (zeta holds beta''); Cartesian C1 with the C2 spline gives C1
+alpha and beta. The node xy displacement is read off directly (``Band.to_xy``);
 alpha = t . delta and beta = n . delta at the nodes.
 
 Geometry error enters through the spline through the nodes (O(l^4) in position, O(l^2) in
