@@ -12,7 +12,9 @@ interior edge is about ``max_edge`` (a 0.1 m square with ``max_edge=0.004`` has 
 Where the object is thinner than about ``max_edge``, Triangle cannot keep its angles without
 boundary nodes it may not add: a mesh with angles under :data:`MIN_ANGLE` (20 degrees, less
 at sharp outline corners) is refused with the thickness to use (one sliver across a 2 mm
-strip made a squeeze 20x too stiff). A finest edge length larger than the object itself
+strip made a squeeze 20x too stiff). A mesh one element thick somewhere (edges from boundary
+to boundary) warns: linear triangles are about 3.3 times too stiff in bending there (1.5 with
+two elements across, 1.1 with four). A finest edge length larger than the object itself
 (``max_edge``, or ``refine_edge`` where refined) warns: that mesh is little more than the
 outline's vertices, most often a length in millimetres among metres.
 
@@ -319,14 +321,49 @@ def _guard(area, perimeter, size, h):
 def _checked(mesh: Mesh, size, h) -> Mesh:
     """``mesh``, with a warning when the finest edge length asked for exceeds the object's
     ``size`` [m]: its mesh is little more than its outline's vertices (a 0.1 m square at
-    max_edge=1 is 2 triangles)."""
+    max_edge=1 is 2 triangles); else when the mesh is one element thick somewhere
+    (:func:`_one_element_thick`)."""
+    name = "refine_edge" if h.refined else "max_edge"
     if h.min_edge > size:
-        name = "refine_edge" if h.refined else "max_edge"
         warnings.warn(f"{name} = {h.min_edge:g} m exceeds the object ({size:g} m across), so its mesh is little "
                       "more than the outline's vertices and a squeeze of it means little; use edges of a few "
                       "percent of the object's size. Every length is in metres (a length in millimetres is 1000 "
                       "times too large)", stacklevel=caller_level())
+        return mesh
+    across = _one_element_thick(mesh)
+    if len(across):
+        length = np.linalg.norm(mesh.points[across[:, 0]] - mesh.points[across[:, 1]], axis=1)
+        k = int(np.argmin(length))
+        warnings.warn(f"with max_edge = {h.max_edge:g} m the mesh is one element thick at {len(across)} edge(s) "
+                      f"from boundary to boundary (the thinnest {length[k]:.3g} m, boundary nodes "
+                      f"{int(across[k, 0])} and {int(across[k, 1])}): linear triangles are several times too stiff "
+                      "in bending there (a ring with 1, 2 and 4 elements across its wall: 3.3, 1.5 and 1.1 times); "
+                      f"use max_edge (or refine_edge there) of at most a quarter of the thickness, here "
+                      f"{length[k] / 4:.3g} m", stacklevel=caller_level())
     return mesh
+
+
+#: boundary steps along one loop within which an edge from boundary to boundary cuts across a
+#: corner rather than a thin part (a 20 degree wedge's tip is one element thick 3-6 steps wide)
+CORNER_STEPS = 6
+
+
+def _one_element_thick(mesh: Mesh) -> np.ndarray:
+    """(k, 2) node pairs: the interior edges of ``mesh`` that join two boundary nodes of different
+    loops or more than :data:`CORNER_STEPS` steps apart along one loop, i.e. where a thin part of
+    the object is one element thick."""
+    T = np.asarray(mesh.triangles)
+    e = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
+    edges, count = np.unique(e, axis=0, return_counts=True)
+    edges = edges[count == 2]
+    loop, step = np.full(mesh.n, -1), np.zeros(mesh.n, dtype=int)
+    for k, nodes in enumerate(np.split(np.asarray(mesh.boundary), np.cumsum(mesh.loops)[:-1])):
+        loop[nodes], step[nodes] = k, np.arange(len(nodes))
+    i, j = edges[:, 0], edges[:, 1]
+    d = np.abs(step[i] - step[j])
+    d = np.minimum(d, np.asarray(mesh.loops)[loop[i]] - d)
+    far = (loop[i] >= 0) & (loop[j] >= 0) & ((loop[i] != loop[j]) | (d > CORNER_STEPS))
+    return edges[far]
 
 
 def _perimeter(ring) -> float:
@@ -481,5 +518,6 @@ def _check_quality(pts, tri, rings, h) -> None:
     where = ", ".join(f"{c:.4g}" for c in p.mean(axis=0))
     raise ValueError(f"max_edge = {h.max_edge:g} m is too coarse for this outline: near ({where}) m the object is "
                      f"about {thin:.2g} m thin and the mesh puts one sliver across it (angles down to {ang[k]:.3g} "
-                     f"degrees), far too stiff; use max_edge <= {thin:.2g} m, or refine_near that place with "
-                     f"refine_edge <= {thin:.2g} m.")
+                     f"degrees), far too stiff; use max_edge <= {thin / 4:.2g} m (four elements across; one is "
+                     f"still about 3 times too stiff in bending), or refine_near that place with refine_edge <= "
+                     f"{thin / 4:.2g} m.")

@@ -1,4 +1,5 @@
 """Mesh container, validation, boundary loops, I/O and built-in shapes (Section II)."""
+import re
 import warnings
 
 import meshio
@@ -233,10 +234,38 @@ def test_a_curved_outline_needs_eight_nodes(make):
 def test_a_max_edge_coarser_than_the_object_is_thin_is_refused(make, coarse, thin):
     """Boundary nodes 20 mm apart on a 2 mm strip (Triangle adds none, -Y) left one sliver
     across it (5.7 degrees) and a squeeze 20x too stiff, with SUCCESS. Refused, naming the
-    thickness, whose max_edge then meshes at the promised quality."""
-    with pytest.raises(ValueError, match=rf"max_edge = .* too coarse .* about {thin:g} m thin .* max_edge <= {thin:g} m"):
+    thickness and a max_edge of a quarter of it, which meshes at the promised quality and four
+    elements across. The thickness itself (once advised) is one element thick, which warns."""
+    with pytest.raises(ValueError, match=rf"max_edge = .* too coarse .* about {thin:g} m thin .* max_edge <= "
+                                         r"(\S+) m \(four elements across; one is still about 3 times") as e:
         make(coarse)
-    assert make(thin).min_angle() > 30.0
+    advised = float(re.search(r"max_edge <= (\S+) m", str(e.value)).group(1))
+    assert advised == pytest.approx(thin / 4, rel=0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert make(advised).min_angle() > 30.0
+    with pytest.warns(UserWarning, match=rf"with max_edge = {thin:g} m the mesh is one element thick at \d+ edge"):
+        make(thin)
+
+
+def test_a_mesh_one_element_thick_somewhere_warns():
+    """A ring meshed one element across its wall is 3.3 times too stiff in bending (two across:
+    1.5, four: 1.1; test_band_squeeze checks those). It warns with the thinnest place and a
+    max_edge of a quarter of it; two across, a coarse square and a 20 degree wedge (one element
+    thick only at its tip) do not."""
+    with pytest.warns(UserWarning, match=r"with max_edge = 0.004 m the mesh is one element thick at 126 edge\(s\) "
+                                         r"from boundary to boundary \(the thinnest 0.004 m, boundary nodes \d+ and "
+                                         r"\d+\): .* here 0.001 m") as said:
+        shapes.annulus(0.042, 0.038, max_edge=0.004)
+    assert len(said) == 1 and said[0].filename == __file__
+    t = np.radians(20.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        shapes.annulus(0.042, 0.038, max_edge=0.002)
+        shapes.rectangle(0.1, 0.1, max_edge=0.05)
+        shapes.polygon([[0, 0], [0.1, 0], [0.1 * np.cos(t), 0.1 * np.sin(t)]], max_edge=0.01)
+    with pytest.warns(UserWarning, match="one element thick"):             # an L whose arms are one element wide
+        shapes.polygon([[0, 0], [0.1, 0], [0.1, 0.01], [0.01, 0.01], [0.01, 0.1], [0, 0.1]], max_edge=0.01)
 
 
 def test_an_edge_length_larger_than_the_object_warns():
