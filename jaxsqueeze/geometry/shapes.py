@@ -42,7 +42,7 @@ import numpy as np
 import triangle as tr
 
 from ..tracing import caller_level
-from .mesh import Mesh
+from .mesh import Mesh, _edge_table
 
 AREA_FACTOR = 1.5
 GRADING = 0.3
@@ -323,8 +323,8 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
     ``size`` [m]: its mesh is little more than its outline's vertices (a 0.1 m square at
     max_edge=1 is 2 triangles); else when the mesh is one element thick somewhere
     (:func:`_one_element_thick`)."""
-    name = "refine_edge" if h.refined else "max_edge"
     if h.min_edge > size:
+        name = "refine_edge" if h.refined else "max_edge"
         warnings.warn(f"{name} = {h.min_edge:g} m exceeds the object ({size:g} m across), so its mesh is little "
                       "more than the outline's vertices and a squeeze of it means little; use edges of a few "
                       "percent of the object's size. Every length is in metres (a length in millimetres is 1000 "
@@ -352,10 +352,8 @@ def _one_element_thick(mesh: Mesh) -> np.ndarray:
     """(k, 2) node pairs: the interior edges of ``mesh`` that join two boundary nodes of different
     loops or more than :data:`CORNER_STEPS` steps apart along one loop, i.e. where a thin part of
     the object is one element thick."""
-    T = np.asarray(mesh.triangles)
-    e = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
-    edges, count = np.unique(e, axis=0, return_counts=True)
-    edges = edges[count == 2]
+    directed, edge, count = _edge_table(np.asarray(mesh.triangles))
+    edges = directed[(count[edge] == 2) & (directed[:, 0] < directed[:, 1])]      # each interior edge once
     loop, step = np.full(mesh.n, -1), np.zeros(mesh.n, dtype=int)
     for k, nodes in enumerate(np.split(np.asarray(mesh.boundary), np.cumsum(mesh.loops)[:-1])):
         loop[nodes], step[nodes] = k, np.arange(len(nodes))
