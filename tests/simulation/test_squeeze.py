@@ -72,6 +72,25 @@ def test_slanted_squeeze_slips_and_holds_invariants(mesh, slanted):
     check_states(res, mesh, 0.23)
 
 
+@pytest.mark.parametrize("turn, mirror", [(0.65, False), (2.0, True)])
+def test_a_rigid_motion_of_the_whole_scene_changes_nothing(mesh, slanted, turn, mirror):
+    """Turned (and mirrored) by a non-right angle and moved 1 km away, the same squeeze: same
+    events at the same depths, same force magnitudes. Node numbers stay (the boundary may start
+    elsewhere), so event rows compare directly."""
+    c, s = np.cos(turn), np.sin(turn)
+    R = np.array([[c, -s], [s, c]]) @ np.diag([-1.0 if mirror else 1.0, 1.0])
+    moved = jsq.Mesh.from_arrays((mesh.points + mesh.offset) @ R.T + [1e3, -2e3], mesh.triangles)
+    base, res = jsq.squeeze(slanted), jsq.squeeze(slanted.replace(mesh=moved))
+    assert res.outcome == base.outcome == jsq.Status.SUCCESS
+    a, b = (sorted(r.events.rows(), key=lambda row: (row[1:], row[0])) for r in (base, res))   # ties may swap
+    assert [r[1:] for r in a] == [r[1:] for r in b]
+    np.testing.assert_allclose([r[0] for r in b], [r[0] for r in a], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.grip_force, base.grip_force, rtol=1e-8)
+    by_node = [np.linalg.norm(r.final_forces, axis=-1)[np.argsort(m.boundary)] for r, m in ((base, mesh), (res, moved))]
+    np.testing.assert_allclose(by_node[1], by_node[0], rtol=0, atol=1e-8 * float(base.grip_force))
+    check_states(res, moved, 0.23)
+
+
 def test_large_friction_equals_all_stick(mesh, slanted):
     big = jsq.squeeze(slanted.replace(friction=1e3))
     stick = jsq.squeeze(slanted.replace(friction_model="stick"))
