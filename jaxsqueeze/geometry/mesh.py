@@ -159,6 +159,10 @@ def _few(items, k: int = 8) -> str:
 
 def _check_arrays(points, triangles):
     """Shapes, finiteness and index range; returns float64 (n, 2) and int64 (t, 3)."""
+    for name, a in (("points", points), ("triangles", triangles)):
+        kind = np.asarray(a).dtype.kind
+        if kind in "bc":     # a cast would drop the imaginary part or read True as 1
+            raise ValueError(f"{name} must be real numbers; got dtype {np.asarray(a).dtype}")
     try:
         pts = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as e:

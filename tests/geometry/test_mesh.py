@@ -94,6 +94,8 @@ def test_boundary_index():
     (np.array([[0, 0], [1, 0], [1, np.inf], [0, 1.0]]), SQUARE_TRI, r"non-finite"),
     (SQUARE, np.array([[0, 1, 2], [0, 2, 4]]), r"out of range 0..3 in triangles 1"),
     (SQUARE, np.array([[0, 1, 2], [0, 2, -1]]), r"out of range"),
+    (SQUARE + 0.5j, SQUARE_TRI, r"points must be real numbers; got dtype complex128"),
+    (SQUARE, SQUARE_TRI > 0, r"triangles must be real numbers; got dtype bool"),
     (np.array([[0, 0], [1, 0], [1, 1], [0, 1], [2, 2.0]]), np.array([[0, 1, 2], [0, 2, 3], [0, 2, 4]]),
      r"degenerate \(zero-area\) triangles 2"),
     (SQUARE, np.array([[0, 1, 2], [0, 2, 2]]), r"degenerate"),
