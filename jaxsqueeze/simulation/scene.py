@@ -51,6 +51,9 @@ class Fingers:
             raise ValueError(f"Fingers.rotation rows have different lengths {rows}: "
                              "give both fingers k coefficients, padding the shorter polynomial with leading zeros "
                              "(highest power first).")
+        if self.rotation is not None and is_concrete(self.rotation) and np.asarray(self.rotation).dtype.kind in "cSU":
+            raise ValueError(f"Fingers.rotation = {np.asarray(self.rotation).tolist()!r:.60}: expected real polynomial coefficients [rad] "
+                             "of shape (2, k)")
         if self.rotation is not None and numeric(self.rotation):
             rot = np.asarray(self.rotation, float)
             if rot.ndim != 2 or rot.shape[0] != 2 or not np.all(np.isfinite(rot)):

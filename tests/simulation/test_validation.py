@@ -318,6 +318,13 @@ def test_wrong_types_and_sizes_are_named(square, change, error, message):
         jsq.squeeze(_scene(square, **change))
 
 
+@pytest.mark.parametrize("rotation", [[[0.1j, 0.0], [0.0, 0.0]], np.array([["0.1"], ["0"]])])
+def test_a_rotation_of_complex_or_text_coefficients_is_named(rotation):
+    """(complex reached a bare float() TypeError inside grasp_of; numpy would drop its imaginary part)"""
+    with pytest.raises(ValueError, match=r"Fingers.rotation = .*: expected real polynomial coefficients"):
+        jsq.Fingers(radius=0.01, rotation=rotation)
+
+
 def test_a_scene_without_an_object_or_with_two_grips_is_named(square):
     """Scene(mesh=None) raised AttributeError: 'NoneType' object has no attribute 'm'; a grip
     given to a placed scene was silently ignored (the placement won)."""
