@@ -4,10 +4,12 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..tracing import caller_level
 from .boundary import crossing, neighbours
 
 
@@ -387,6 +389,37 @@ def _loop_normals(p):
     return np.where(norm > 1e-12, s / np.maximum(norm, 1e-300), n)
 
 
+#: boundary steps along one loop within which an edge from boundary to boundary cuts across a
+#: corner rather than a thin part (a 20 degree wedge's tip is one element thick 3-6 steps wide)
+CORNER_STEPS = 6
+
+
+def one_element_thick(mesh: Mesh) -> tuple[str, float] | None:
+    """Where ``mesh`` is one element thick: None, or (what to say, the thinnest such edge [m]).
+
+    Such a place is an interior edge that joins two boundary nodes of different loops or more
+    than :data:`CORNER_STEPS` steps apart along one loop. Linear triangles are several times
+    too stiff in bending there (a ring with 1, 2 and 4 elements across its wall: 3.3, 1.5 and
+    1.1 times, ``tests/simulation/test_band_squeeze.py``)."""
+    directed, edge, count = _edge_table(np.asarray(mesh.triangles))
+    edges = directed[(count[edge] == 2) & (directed[:, 0] < directed[:, 1])]      # each interior edge once
+    loop, step = np.full(mesh.n, -1), np.zeros(mesh.n, dtype=int)
+    for k, nodes in enumerate(np.split(np.asarray(mesh.boundary), np.cumsum(mesh.loops)[:-1])):
+        loop[nodes], step[nodes] = k, np.arange(len(nodes))
+    i, j = edges[:, 0], edges[:, 1]
+    d = np.abs(step[i] - step[j])
+    d = np.minimum(d, np.asarray(mesh.loops)[loop[i]] - d)
+    across = edges[(loop[i] >= 0) & (loop[j] >= 0) & ((loop[i] != loop[j]) | (d > CORNER_STEPS))]
+    if not len(across):
+        return None
+    length = np.linalg.norm(mesh.points[across[:, 0]] - mesh.points[across[:, 1]], axis=1)
+    k = int(np.argmin(length))
+    return (f"one element thick at {len(across)} edge(s) from boundary to boundary (the thinnest {length[k]:.3g} m, "
+            f"boundary nodes {int(across[k, 0])} and {int(across[k, 1])}): linear triangles are several times too "
+            "stiff in bending there (a ring with 1, 2 and 4 elements across its wall: 3.3, 1.5 and 1.1 times)",
+            float(length[k]))
+
+
 def read_mesh(path) -> Mesh:
     """Read a planar triangle mesh from any file format meshio knows (.msh, .vtu, .xdmf, ...).
 
@@ -398,6 +431,9 @@ def read_mesh(path) -> Mesh:
     Raises:
         ValueError: no triangle cells in the file, or nodes off the z = 0 plane, or any
             :meth:`Mesh.from_arrays` error.
+
+    Warns (``UserWarning``) when the mesh is one element thick somewhere
+    (:func:`one_element_thick`): it would be several times too stiff in bending there.
     """
     import os
 
@@ -451,7 +487,12 @@ def read_mesh(path) -> Mesh:
             raise ValueError(f"mesh in {path} is not planar: nodes {_few(bad)} have z = "
                              f"{_few(pts[bad, 2])} (must be 0); jaxsqueeze needs meshes in the z = 0 plane")
         pts = xy
-    return Mesh.from_arrays(pts, np.concatenate(blocks, axis=0))
+    mesh = Mesh.from_arrays(pts, np.concatenate(blocks, axis=0))
+    thin = one_element_thick(mesh)
+    if thin:
+        warnings.warn(f"the mesh in {path} is {thin[0]}; mesh it again with edges of at most a quarter of the "
+                      f"thickness there, here {thin[1] / 4:.3g} m", stacklevel=caller_level())
+    return mesh
 
 
 def write_mesh(path, mesh: Mesh, point_data=None, file_format=None) -> None:

@@ -42,7 +42,7 @@ import numpy as np
 import triangle as tr
 
 from ..tracing import caller_level
-from .mesh import Mesh, _edge_table
+from .mesh import Mesh, one_element_thick
 
 AREA_FACTOR = 1.5
 GRADING = 0.3
@@ -322,7 +322,7 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
     """``mesh``, with a warning when the finest edge length asked for exceeds the object's
     ``size`` [m]: its mesh is little more than its outline's vertices (a 0.1 m square at
     max_edge=1 is 2 triangles); else when the mesh is one element thick somewhere
-    (:func:`_one_element_thick`)."""
+    (:func:`~jaxsqueeze.geometry.mesh.one_element_thick`)."""
     if h.min_edge > size:
         name = "refine_edge" if h.refined else "max_edge"
         warnings.warn(f"{name} = {h.min_edge:g} m exceeds the object ({size:g} m across), so its mesh is little "
@@ -330,38 +330,12 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
                       "percent of the object's size. Every length is in metres (a length in millimetres is 1000 "
                       "times too large)", stacklevel=caller_level())
         return mesh
-    across = _one_element_thick(mesh)
-    if len(across):
-        length = np.linalg.norm(mesh.points[across[:, 0]] - mesh.points[across[:, 1]], axis=1)
-        k = int(np.argmin(length))
-        warnings.warn(f"with max_edge = {h.max_edge:g} m the mesh is one element thick at {len(across)} edge(s) "
-                      f"from boundary to boundary (the thinnest {length[k]:.3g} m, boundary nodes "
-                      f"{int(across[k, 0])} and {int(across[k, 1])}): linear triangles are several times too stiff "
-                      "in bending there (a ring with 1, 2 and 4 elements across its wall: 3.3, 1.5 and 1.1 times); "
-                      f"use max_edge (or refine_edge there) of at most a quarter of the thickness, here "
-                      f"{length[k] / 4:.3g} m", stacklevel=caller_level())
+    thin = one_element_thick(mesh)
+    if thin:
+        warnings.warn(f"with max_edge = {h.max_edge:g} m the mesh is {thin[0]}; use max_edge (or refine_edge "
+                      f"there) of at most a quarter of the thickness, here {thin[1] / 4:.3g} m",
+                      stacklevel=caller_level())
     return mesh
-
-
-#: boundary steps along one loop within which an edge from boundary to boundary cuts across a
-#: corner rather than a thin part (a 20 degree wedge's tip is one element thick 3-6 steps wide)
-CORNER_STEPS = 6
-
-
-def _one_element_thick(mesh: Mesh) -> np.ndarray:
-    """(k, 2) node pairs: the interior edges of ``mesh`` that join two boundary nodes of different
-    loops or more than :data:`CORNER_STEPS` steps apart along one loop, i.e. where a thin part of
-    the object is one element thick."""
-    directed, edge, count = _edge_table(np.asarray(mesh.triangles))
-    edges = directed[(count[edge] == 2) & (directed[:, 0] < directed[:, 1])]      # each interior edge once
-    loop, step = np.full(mesh.n, -1), np.zeros(mesh.n, dtype=int)
-    for k, nodes in enumerate(np.split(np.asarray(mesh.boundary), np.cumsum(mesh.loops)[:-1])):
-        loop[nodes], step[nodes] = k, np.arange(len(nodes))
-    i, j = edges[:, 0], edges[:, 1]
-    d = np.abs(step[i] - step[j])
-    d = np.minimum(d, np.asarray(mesh.loops)[loop[i]] - d)
-    far = (loop[i] >= 0) & (loop[j] >= 0) & ((loop[i] != loop[j]) | (d > CORNER_STEPS))
-    return edges[far]
 
 
 def _perimeter(ring) -> float:

@@ -705,7 +705,10 @@ def _object(obj, base, grip_points, overrides=(None, None)):
         if not os.path.exists(path):
             raise SceneFileError("object.mesh_file", f"no such file: {path}")
         try:
-            return read_mesh(path), []
+            with warnings_module.catch_warnings(record=True) as caught:   # scene-file warnings are the spec's
+                warnings_module.simplefilter("always")
+                mesh = read_mesh(path)
+            return mesh, [f"object.mesh_file: {w.message}" for w in caught]
         except ValueError as e:
             raise SceneFileError("object.mesh_file", str(e)) from None
         except Exception as e:  # meshio's own read errors (unknown format, corrupt file)

@@ -182,6 +182,22 @@ def test_example_scene_reads_mesh_file():
     np.testing.assert_allclose(p, [[0.0, -0.04], [0.006946, 0.039392]], atol=1e-3)  # nearest nodes
 
 
+def test_a_mesh_file_one_element_thick_somewhere_warns(tmp_path):
+    """The built-in shapes' warning (test_mesh.py) now also covers mesh files: a ring one element
+    across its wall, read from a file, is 3.3 times too stiff in bending."""
+    with pytest.warns(UserWarning, match="one element thick"):
+        ring = jsq.shapes.annulus(0.042, 0.038, max_edge=0.004)
+    jsq.write_mesh(tmp_path / "ring.vtu", ring)
+    with pytest.warns(UserWarning, match=r"the mesh in .*ring.vtu is one element thick at 126 edge\(s\) .* here "
+                                         r"0.001 m") as said:
+        jsq.read_mesh(tmp_path / "ring.vtu")
+    assert len(said) == 1 and said[0].filename == __file__
+    text = ('[object]\nmesh_file = "ring.vtu"\n[material]\nE = 1e5\nnu = 0.3\nthickness = 0.01\n'
+            "[fingers]\nradius = 0.01\n[grip]\npoints = [[0.0, -0.042], [0.0, 0.042]]\n[squeeze]\ndepth = 0.002\n")
+    said = scenefile.load_text(text, base=str(tmp_path)).warnings
+    assert [w for w in said if "one element thick" in w][0].startswith("object.mesh_file: the mesh in "), said
+
+
 def test_a_mesh_file_in_millimetres_warns(tmp_path):
     """Unit checks ran only on built-in shapes (sized before meshing): a mesh file written in
     mm (a 100-unit square) squeezed with SUCCESS and no word. They now run on the object as
