@@ -14,6 +14,7 @@ from ..tracing import is_concrete
 from .engine import Stats
 from .laws import EVENT_KINDS
 from .status import Status
+from .validate import RULES
 
 
 def norm(v, xp=jnp):
@@ -213,8 +214,13 @@ class SqueezeResult:
         """Raise ``RuntimeError`` with advice unless the squeeze reached its target depth."""
         self._one("result.raise_for_status()")
         if self.outcome != Status.SUCCESS:
+            said = ""
+            k = int(np.asarray(self.invalid)) if self.invalid is not None else -1
+            if self.outcome == Status.INVALID_INPUT and 0 <= k < len(RULES):     # the field, in words
+                said = f" Here it is {RULES[k].field} (result.invalid = {k}): expected {RULES[k].requirement}; " \
+                       f"{RULES[k].fix}."
             raise RuntimeError(f"squeeze ended with {self.outcome.name} at depth {float(self.final_depth):.6g} m: "
-                               f"{self.outcome.advice}")
+                               f"{self.outcome.advice}{said}")
         return self
 
     def trim(self) -> "SqueezeResult":

@@ -234,6 +234,9 @@ def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
     assert np.all(np.asarray(lane.events.kind)[int(lane.n_events):] == -1)
     with pytest.raises(ValueError, match=r"this event log holds a batch .* take one squeeze first"):
         out.events.rows()
+    with pytest.raises(RuntimeError, match=r"INVALID_INPUT .* Here it is depth \(result.invalid = 5\): expected a finite "
+                                           r"depth > 0 m"):                  # the field in words, not just its index
+        jax.tree.map(lambda a: a[1], out).raise_for_status()
     # and under tracing they, and throw=True, say what to do instead of a ConcretizationTypeError
     with pytest.raises(ValueError, match="throw=True raises on the status, which is traced under jax.jit"):
         jax.jit(lambda d: jsq.squeeze(slanted.replace(depth=d), throw=True).grip_force)(d0)
