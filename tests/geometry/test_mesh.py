@@ -258,12 +258,16 @@ def test_a_mesh_one_element_thick_somewhere_warns():
     with pytest.warns(UserWarning, match=r"with max_edge = 0.004 m the mesh is one element thick at 126 edge\(s\) "
                                          r"from boundary to boundary \(the thinnest 0.004 m, boundary nodes \d+ and "
                                          r"\d+\): .* here 0.001 m") as said:
-        shapes.annulus(0.042, 0.038, max_edge=0.004)
+        ring = shapes.annulus(0.042, 0.038, max_edge=0.004)
     assert len(said) == 1 and said[0].filename == __file__
+    import jaxsqueeze.geometry.mesh                                   # docs/errors.md: how to ask directly
+    text, thinnest = jaxsqueeze.geometry.mesh.one_element_thick(ring)
+    assert text.startswith("one element thick at 126 edge(s)") and thinnest == pytest.approx(0.004, rel=0.02)
+    assert jaxsqueeze.geometry.mesh.one_element_thick(Mesh.from_arrays(ring.points, ring.triangles)) is not None
     t = np.radians(20.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        shapes.annulus(0.042, 0.038, max_edge=0.002)
+        assert jaxsqueeze.geometry.mesh.one_element_thick(shapes.annulus(0.042, 0.038, max_edge=0.002)) is None
         shapes.rectangle(0.1, 0.1, max_edge=0.05)
         shapes.polygon([[0, 0], [0.1, 0], [0.1 * np.cos(t), 0.1 * np.sin(t)]], max_edge=0.01)
     with pytest.warns(UserWarning, match="one element thick"):             # an L whose arms are one element wide
