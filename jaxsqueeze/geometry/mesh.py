@@ -389,35 +389,55 @@ def _loop_normals(p):
     return np.where(norm > 1e-12, s / np.maximum(norm, 1e-300), n)
 
 
-#: boundary steps along one loop within which an edge from boundary to boundary cuts across a
-#: corner rather than a thin part (a 20 degree wedge's tip is one element thick 3-6 steps wide)
-CORNER_STEPS = 6
+#: boundary steps along one loop within which a place 1 or 2 elements thick is the tip of a
+#: corner rather than a thin part: a wedge's tip is thin at any mesh size (at 20 degrees one
+#: element thick up to 6 steps wide, two up to 14); sharper wedges warn
+CORNER_STEPS = {1: 6, 2: 14}
+#: how many times too stiff in bending linear triangles make a thin part 1 and 2 elements thick
+#: (a ring at w/R = 0.1, ``tests/simulation/test_band_squeeze.py``; 4 across: 1.1)
+TOO_STIFF = {1: 3.3, 2: 1.5}
 
 
-def one_element_thick(mesh: Mesh) -> tuple[str, float] | None:
-    """Where ``mesh`` is one element thick: None, or (what to say, the thinnest such edge [m]).
+def too_thin(mesh: Mesh) -> tuple[str, float] | None:
+    """Where ``mesh`` is one or two elements thick: None, or (what to say, the thinnest such
+    place [m]), for the fewest elements across found.
 
-    Such a place is an interior edge that joins two boundary nodes of different loops or more
-    than :data:`CORNER_STEPS` steps apart along one loop. Linear triangles are several times
-    too stiff in bending there (a ring with 1, 2 and 4 elements across its wall: 3.3, 1.5 and
-    1.1 times, ``tests/simulation/test_band_squeeze.py``)."""
+    A place one element thick is an interior edge joining two boundary nodes that lie on
+    different loops or more than ``CORNER_STEPS[1]`` steps apart along one; two elements
+    thick, an interior node joined to two boundary nodes on different loops or more than
+    ``CORNER_STEPS[2]`` steps apart. Linear triangles are :data:`TOO_STIFF` times too stiff in
+    bending there."""
     directed, edge, count = _edge_table(np.asarray(mesh.triangles))
     edges = directed[(count[edge] == 2) & (directed[:, 0] < directed[:, 1])]      # each interior edge once
     loop, step = np.full(mesh.n, -1), np.zeros(mesh.n, dtype=int)
     for k, nodes in enumerate(np.split(np.asarray(mesh.boundary), np.cumsum(mesh.loops)[:-1])):
         loop[nodes], step[nodes] = k, np.arange(len(nodes))
-    i, j = edges[:, 0], edges[:, 1]
-    d = np.abs(step[i] - step[j])
-    d = np.minimum(d, np.asarray(mesh.loops)[loop[i]] - d)
-    across = edges[(loop[i] >= 0) & (loop[j] >= 0) & ((loop[i] != loop[j]) | (d > CORNER_STEPS))]
-    if not len(across):
-        return None
-    length = np.linalg.norm(mesh.points[across[:, 0]] - mesh.points[across[:, 1]], axis=1)
-    k = int(np.argmin(length))
-    return (f"one element thick at {len(across)} edge(s) from boundary to boundary (the thinnest {length[k]:.3g} m, "
-            f"boundary nodes {int(across[k, 0])} and {int(across[k, 1])}): linear triangles are several times too "
-            "stiff in bending there (a ring with 1, 2 and 4 elements across its wall: 3.3, 1.5 and 1.1 times)",
-            float(length[k]))
+
+    def far(i, j, steps):
+        d = np.abs(step[i] - step[j])
+        return (loop[i] != loop[j]) | (np.minimum(d, np.asarray(mesh.loops)[loop[i]] - d) > steps)
+
+    on = loop[edges] >= 0
+    across = edges[on.all(axis=1)]
+    pairs = {1: across[far(across[:, 0], across[:, 1], CORNER_STEPS[1])]}
+    mixed = on[:, 0] != on[:, 1]                                      # interior node -- boundary node
+    v = np.where(on[mixed, 0], edges[mixed, 1], edges[mixed, 0])
+    b = np.where(on[mixed, 0], edges[mixed, 0], edges[mixed, 1])
+    order = np.argsort(v, kind="stable")
+    v, b = v[order], b[order]
+    two = [np.c_[b[:-k], b[k:]][v[:-k] == v[k:]] for k in range(1, int(np.bincount(v).max(initial=0)))]
+    two = np.concatenate([np.zeros((0, 2), int), *two])
+    pairs[2] = two[far(two[:, 0], two[:, 1], CORNER_STEPS[2])]
+    for k, found in pairs.items():
+        if len(found):
+            length = np.linalg.norm(mesh.points[found[:, 0]] - mesh.points[found[:, 1]], axis=1)
+            i = int(np.argmin(length))
+            return (f"{('one element', 'two elements')[k - 1]} thick at {len(found)} place(s) from boundary to "
+                    f"boundary (the thinnest {length[i]:.3g} m, between boundary nodes {int(found[i, 0])} and "
+                    f"{int(found[i, 1])}): linear triangles are about {TOO_STIFF[k]} times too stiff in bending "
+                    "there (a ring with 1, 2 and 4 elements across its wall: 3.3, 1.5 and 1.1 times)",
+                    float(length[i]))
+    return None
 
 
 def read_mesh(path) -> Mesh:
@@ -432,8 +452,8 @@ def read_mesh(path) -> Mesh:
         ValueError: no triangle cells in the file, or nodes off the z = 0 plane, or any
             :meth:`Mesh.from_arrays` error.
 
-    Warns (``UserWarning``) when the mesh is one element thick somewhere
-    (:func:`one_element_thick`): it would be several times too stiff in bending there.
+    Warns (``UserWarning``) when the mesh is one or two elements thick somewhere
+    (:func:`too_thin`): it would be several times too stiff in bending there.
     """
     import os
 
@@ -488,7 +508,7 @@ def read_mesh(path) -> Mesh:
                              f"{_few(pts[bad, 2])} (must be 0); jaxsqueeze needs meshes in the z = 0 plane")
         pts = xy
     mesh = Mesh.from_arrays(pts, np.concatenate(blocks, axis=0))
-    thin = one_element_thick(mesh)
+    thin = too_thin(mesh)
     if thin:
         warnings.warn(f"the mesh in {path} is {thin[0]}; mesh it again with edges of at most a quarter of the "
                       f"thickness there, here {thin[1] / 4:.3g} m", stacklevel=caller_level())

@@ -12,9 +12,9 @@ interior edge is about ``max_edge`` (a 0.1 m square with ``max_edge=0.004`` has 
 Where the object is thinner than about ``max_edge``, Triangle cannot keep its angles without
 boundary nodes it may not add: a mesh with angles under :data:`MIN_ANGLE` (20 degrees, less
 at sharp outline corners) is refused with the thickness to use (one sliver across a 2 mm
-strip made a squeeze 20x too stiff). A mesh one element thick somewhere (edges from boundary
-to boundary) warns: linear triangles are about 3.3 times too stiff in bending there (1.5 with
-two elements across, 1.1 with four). A finest edge length larger than the object itself
+strip made a squeeze 20x too stiff). A mesh one or two elements thick somewhere warns
+(:func:`~jaxsqueeze.geometry.mesh.too_thin`): linear triangles are about 3.3 and 1.5 times too
+stiff in bending there (1.1 with four elements across). A finest edge length larger than the object itself
 (``max_edge``, or ``refine_edge`` where refined) warns: that mesh is little more than the
 outline's vertices, most often a length in millimetres among metres.
 
@@ -42,7 +42,7 @@ import numpy as np
 import triangle as tr
 
 from ..tracing import caller_level
-from .mesh import Mesh, one_element_thick
+from .mesh import Mesh, too_thin
 
 AREA_FACTOR = 1.5
 GRADING = 0.3
@@ -321,8 +321,8 @@ def _guard(area, perimeter, size, h):
 def _checked(mesh: Mesh, size, h) -> Mesh:
     """``mesh``, with a warning when the finest edge length asked for exceeds the object's
     ``size`` [m]: its mesh is little more than its outline's vertices (a 0.1 m square at
-    max_edge=1 is 2 triangles); else when the mesh is one element thick somewhere
-    (:func:`~jaxsqueeze.geometry.mesh.one_element_thick`)."""
+    max_edge=1 is 2 triangles); else when the mesh is one or two elements thick somewhere
+    (:func:`~jaxsqueeze.geometry.mesh.too_thin`)."""
     if h.min_edge > size:
         name = "refine_edge" if h.refined else "max_edge"
         warnings.warn(f"{name} = {h.min_edge:g} m exceeds the object ({size:g} m across), so its mesh is little "
@@ -330,7 +330,7 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
                       "percent of the object's size. Every length is in metres (a length in millimetres is 1000 "
                       "times too large)", stacklevel=caller_level())
         return mesh
-    thin = one_element_thick(mesh)
+    thin = too_thin(mesh)
     if thin:
         warnings.warn(f"with max_edge = {h.max_edge:g} m the mesh is {thin[0]}; use max_edge (or refine_edge "
                       f"there) of at most a quarter of the thickness, here {thin[1] / 4:.3g} m",

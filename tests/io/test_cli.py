@@ -184,11 +184,11 @@ def test_example_scene_reads_mesh_file():
 
 def test_a_mesh_file_one_element_thick_somewhere_warns(tmp_path):
     """The built-in shapes' warning (test_mesh.py) now also covers mesh files: a ring one element
-    across its wall, read from a file, is 3.3 times too stiff in bending."""
+    across its wall, read from a file, is 3.3 times too stiff in bending (two across: 1.5)."""
     with pytest.warns(UserWarning, match="one element thick"):
         ring = jsq.shapes.annulus(0.042, 0.038, max_edge=0.004)
     jsq.write_mesh(tmp_path / "ring.vtu", ring)
-    with pytest.warns(UserWarning, match=r"the mesh in .*ring.vtu is one element thick at 126 edge\(s\) .* here "
+    with pytest.warns(UserWarning, match=r"the mesh in .*ring.vtu is one element thick at 126 place\(s\) .* here "
                                          r"0.001 m") as said:
         jsq.read_mesh(tmp_path / "ring.vtu")
     assert len(said) == 1 and said[0].filename == __file__
