@@ -321,7 +321,8 @@ def _guard(area, perimeter, size, h):
 def _checked(mesh: Mesh, size, h) -> Mesh:
     """``mesh``, with a warning when the finest edge length asked for exceeds the object's
     ``size`` [m]: its mesh is little more than its outline's vertices (a 0.1 m square at
-    max_edge=1 is 2 triangles); else when the mesh is one or two elements thick somewhere
+    max_edge=1 is 2 triangles); else when a ``refine_near`` point is too far from the object
+    to refine any of it, and when the mesh is one or two elements thick somewhere
     (:func:`~jaxsqueeze.geometry.mesh.too_thin`)."""
     if h.min_edge > size:
         name = "refine_edge" if h.refined else "max_edge"
@@ -330,6 +331,15 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
                       "percent of the object's size. Every length is in metres (a length in millimetres is 1000 "
                       "times too large)", stacklevel=caller_level())
         return mesh
+    if h.refined:
+        pts = np.asarray(mesh.points) + np.asarray(mesh.offset)
+        for k, xy in enumerate(h.near):
+            d = np.linalg.norm(pts - xy, axis=1)
+            if d.min() > h.reach:
+                warnings.warn(f"refine_near point {k} {xy.tolist()} is {d.min():.3g} m from the object's nearest "
+                              f"node {pts[np.argmin(d)].tolist()}, beyond the {h.reach:.3g} m its refinement reaches: "
+                              "nothing is refined for it. Points are in metres, in the shape's own frame (a "
+                              "rectangle, disk, ellipse or annulus is centred on the origin)", stacklevel=caller_level())
     thin = too_thin(mesh)
     if thin:
         warnings.warn(f"with max_edge = {h.max_edge:g} m the mesh is {thin[0]}; use max_edge (or refine_edge "
@@ -379,6 +389,7 @@ def _sizing(max_edge, refine_near=None, refine_edge=None, refine_radius=None):
 
     h.max_edge, h.min_edge, h.refined = h_max, h_min, True
     h.radius, h.count = radius, len(near)
+    h.near, h.reach = near, radius + (h_max - h_min) / GRADING       # beyond reach, h(x) = max_edge
     return h
 
 

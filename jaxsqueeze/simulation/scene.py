@@ -436,19 +436,37 @@ def boundary_curve(obj) -> "boundary.Curve":
     return boundary.curve(np.asarray(obj.points), (obj.m,))
 
 
+def boundary_edge_at(pts, loops, i: int) -> float:
+    """The longer of the two boundary edges [m] at position ``i`` of the boundary order, for
+    boundary points ``pts`` (m, 2) in loops of the lengths ``loops``."""
+    ends = np.cumsum(loops)
+    k = int(np.searchsorted(ends, i, side="right"))
+    start, n = int(ends[k] - loops[k]), int(loops[k])
+    pair = start + (i - start + np.array([1, -1])) % n
+    return float(np.linalg.norm(pts[pair] - pts[i], axis=1).max())
+
+
 def nearest_boundary_node(obj, xy) -> int:
     """Boundary node of a mesh or band nearest to ``xy`` (2,) in the caller's frame [m]
     (``points + offset``; both :class:`Mesh` and :class:`~jaxsqueeze.band.Band` keep the node
     centroid at the origin and the caller's frame in ``offset``). Warns when two nodes are
-    equally near (a point midway between nodes: which one is taken decides the grip's slant)."""
+    equally near (a point midway between nodes: which one is taken decides the grip's slant),
+    and when the nearest is farther than twice the boundary edges there (a point off the
+    outline, as the scene files refuse: e.g. millimetres among metres)."""
     xy = np.asarray(xy, float)
     if isinstance(obj, Mesh):
-        pts, nodes = obj.points[obj.boundary] + obj.offset, np.asarray(obj.boundary)
+        pts, nodes, loops = obj.points[obj.boundary] + obj.offset, np.asarray(obj.boundary), obj.loops
     else:
-        pts, nodes = obj.points + obj.offset, np.arange(obj.m)
+        pts, nodes, loops = obj.points + obj.offset, np.arange(obj.m), (obj.m,)
     dist = np.linalg.norm(pts - xy, axis=1)
     k = np.argsort(dist, kind="stable")[:2]       # (argmin's choice among equals: the first)
-    if len(k) == 2 and dist[k[1]] - dist[k[0]] <= 1e-6 * dist[k[1]]:      # (the scene files' tie rule)
+    h = boundary_edge_at(pts, loops, int(k[0]))
+    if dist[k[0]] > 2 * h:
+        warnings.warn(f"{xy.tolist()} is {dist[k[0]]:.3g} m from the nearest boundary node {int(nodes[k[0]])} at "
+                      f"{pts[k[0]].tolist()}, more than twice the boundary edges there ({h:.3g} m); it is taken, but "
+                      "a grip point belongs on the object's outline (lengths in metres, in the mesh's frame)",
+                      stacklevel=2)
+    elif len(k) == 2 and dist[k[1]] - dist[k[0]] <= 1e-6 * dist[k[1]]:      # (the scene files' tie rule)
         warnings.warn(f"boundary nodes {int(nodes[k[0]])} and {int(nodes[k[1]])} are equally near {xy.tolist()} "
                       f"({dist[k[0]]:.3g} m), node {int(nodes[k[0]])} is taken; for a node at that point mesh with "
                       "refine_near=[point] (shapes) or pick the node yourself", stacklevel=2)

@@ -486,6 +486,17 @@ def test_coordinates_too_far_from_the_origin_to_resolve_the_object_are_refused()
             Mesh.from_arrays(P + off, T)
 
 
+def test_a_refine_near_point_too_far_to_refine_anything_warns():
+    """refine_near in millimetres ([0, 50] for the top of a 0.1 m square) refined nothing, silently."""
+    with pytest.warns(UserWarning, match=r"refine_near point 1 \[5.0, 50.0\] is 50.2 m from the object's nearest node "
+                                         r".* nothing is refined for it. Points are in metres") as said:
+        shapes.rectangle(0.1, 0.1, max_edge=0.01, refine_near=[[0.005, 0.05], [5.0, 50.0]], refine_edge=0.002)
+    assert len(said) == 1 and said[0].filename == __file__
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                               # just outside the outline refines it
+        shapes.rectangle(0.1, 0.1, max_edge=0.01, refine_near=[[0.0, 0.06]], refine_edge=0.002)
+
+
 def test_refine_near_of_the_wrong_shape_is_named():
     """refine_near=[0, 0, 0] failed with numpy's "cannot reshape array of size 3"."""
     for bad in ([0.0, 0.0, 0.0], "x", [[0.0, float("nan")]]):

@@ -204,6 +204,16 @@ def test_nearest_boundary_node_warns_when_two_nodes_are_equally_near(square):
         assert jsq.scene.nearest_boundary_node(square, (square.points + square.offset)[node]) == node
 
 
+@pytest.mark.parametrize("xy", [(0.0, 50.0), (0.0, 0.0)])
+def test_nearest_boundary_node_warns_of_a_point_off_the_outline(square, xy):
+    """A point in millimetres among metres, or the object's centre, snapped silently to some
+    boundary node; the scene files refuse it, the function says so (one warning, not also a tie)."""
+    with pytest.warns(UserWarning, match=r"is .* m from the nearest boundary node \d+ at .*, more than twice the "
+                                         r"boundary edges there .* a grip point belongs on the object's outline") as said:
+        jsq.scene.nearest_boundary_node(square, xy)
+    assert len(said) == 1 and said[0].filename == __file__
+
+
 def test_a_depth_as_large_as_the_object_is_refused_also_across_a_diagonal(square):
     """A grip across the square's diagonal is 0.14 m apart, so a 0.105 m squeeze passes the
     grip-distance rule; it is deeper than the object is across (0.1 m) and was SUCCESS with
