@@ -339,7 +339,8 @@ def _checked(mesh: Mesh, size, h) -> Mesh:
                 warnings.warn(f"refine_near point {k} {xy.tolist()} is {d.min():.3g} m from the object's nearest "
                               f"node {pts[np.argmin(d)].tolist()}, beyond the {h.reach:.3g} m its refinement reaches: "
                               "nothing is refined for it. Points are in metres, in the shape's own frame (a "
-                              "rectangle, disk, ellipse or annulus is centred on the origin)", stacklevel=caller_level())
+                              "rectangle, disk, ellipse or annulus is centred on the origin)",
+                              stacklevel=caller_level())
     thin = too_thin(mesh)
     if thin:
         warnings.warn(f"with max_edge = {h.max_edge:g} m the mesh is {thin[0]}; use max_edge (or refine_edge "

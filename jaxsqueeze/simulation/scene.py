@@ -52,8 +52,8 @@ class Fingers:
                              "give both fingers k coefficients, padding the shorter polynomial with leading zeros "
                              "(highest power first).")
         if self.rotation is not None and is_concrete(self.rotation) and np.asarray(self.rotation).dtype.kind in "cSU":
-            raise ValueError(f"Fingers.rotation = {np.asarray(self.rotation).tolist()!r:.60}: expected real polynomial coefficients [rad] "
-                             "of shape (2, k)")
+            raise ValueError(f"Fingers.rotation = {np.asarray(self.rotation).tolist()!r:.60}: expected real "
+                             "polynomial coefficients [rad] of shape (2, k)")
         if self.rotation is not None and numeric(self.rotation):
             rot = np.asarray(self.rotation, float)
             if rot.ndim != 2 or rot.shape[0] != 2 or not np.all(np.isfinite(rot)):
@@ -436,7 +436,7 @@ def boundary_curve(obj) -> "boundary.Curve":
     return boundary.curve(np.asarray(obj.points), (obj.m,))
 
 
-def boundary_edge_at(pts, loops, i: int) -> float:
+def _boundary_edge_at(pts, loops, i: int) -> float:
     """The longer of the two boundary edges [m] at position ``i`` of the boundary order, for
     boundary points ``pts`` (m, 2) in loops of the lengths ``loops``."""
     ends = np.cumsum(loops)
@@ -460,7 +460,7 @@ def nearest_boundary_node(obj, xy) -> int:
         pts, nodes, loops = obj.points + obj.offset, np.arange(obj.m), (obj.m,)
     dist = np.linalg.norm(pts - xy, axis=1)
     k = np.argsort(dist, kind="stable")[:2]       # (argmin's choice among equals: the first)
-    h = boundary_edge_at(pts, loops, int(k[0]))
+    h = _boundary_edge_at(pts, loops, int(k[0]))
     if dist[k[0]] > 2 * h:
         warnings.warn(f"{xy.tolist()} is {dist[k[0]]:.3g} m from the nearest boundary node {int(nodes[k[0]])} at "
                       f"{pts[k[0]].tolist()}, more than twice the boundary edges there ({h:.3g} m); it is taken, but "
