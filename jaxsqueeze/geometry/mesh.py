@@ -525,10 +525,19 @@ def write_mesh(path, mesh: Mesh, point_data=None, file_format=None) -> None:
         point_data: optional dict of extra per-node arrays, each (n,) or (n, k).
         file_format: optional meshio format name.
 
-    The point data always includes ``"boundary"`` (n,) int: 1 at boundary nodes, else 0.
+    Raises ``ValueError`` for a folder, or a name whose suffix names no format meshio knows
+    (without ``file_format``). The point data always includes ``"boundary"`` (n,) int: 1 at boundary nodes, else 0.
     """
+    import os
+
     import meshio
 
+    name = os.fspath(path)
+    if os.path.isdir(name):
+        raise ValueError(f"{name} is a folder; write_mesh needs a file name such as {os.path.join(name, 'mesh.vtu')}")
+    if file_format is None and not any(name.lower().endswith(e) for e in meshio.extension_to_filetypes):
+        raise ValueError(f"cannot tell a mesh format from the name {name!r}: end it in .vtu (ParaView), .msh "
+                         "(gmsh), .xdmf, .vtk or another suffix meshio knows, or pass file_format=")
     pts = np.column_stack([mesh.points + mesh.offset, np.zeros(mesh.n)])
     flag = np.zeros(mesh.n, dtype=np.int64)
     flag[mesh.boundary] = 1

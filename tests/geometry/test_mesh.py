@@ -392,6 +392,17 @@ def test_round_trip(tmp_path, name):
     assert r.loops == m.loops
 
 
+def test_write_mesh_refuses_a_folder_or_a_suffix_of_no_format(tmp_path):
+    """(meshio said "ReadError: Could not deduce file format" for a write)"""
+    m = shapes.rectangle(0.1, 0.1, max_edge=0.05)
+    with pytest.raises(ValueError, match=r"is a folder; write_mesh needs a file name such as .*mesh.vtu"):
+        write_mesh(tmp_path, m)
+    with pytest.raises(ValueError, match=r"cannot tell a mesh format from the name .*m.xyz.*: end it in .vtu"):
+        write_mesh(tmp_path / "m.xyz", m)
+    write_mesh(tmp_path / "m.xyz", m, file_format="vtu")          # a format given needs no suffix
+    assert meshio.read(tmp_path / "m.xyz", file_format="vtu").points.shape == (m.n, 3)
+
+
 def test_read_gmsh22_written_by_meshio(tmp_path):
     pts, tri = grid(2, 2)
     path = tmp_path / "g.msh"
