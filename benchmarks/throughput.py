@@ -282,6 +282,10 @@ def main(argv=None):
     p.add_argument("--reps", type=int, default=5)
     p.add_argument("--batches", type=int, nargs="+", default=[1, 16, 64, 256], help="CPU batch sizes")
     p.add_argument("--gpu-batches", type=int, nargs="+", default=[1, 256, 1024, 4096])
+    p.add_argument("--gpu-only", action="store_true",
+                   help="on a GPU machine: the scene, one squeeze and the GPU batches only (throughput_gpu.*)")
+    p.add_argument("--gpu-reps", type=int, default=3, help="repeats per GPU batch (best of)")
+    p.add_argument("--gpu-timeout", type=float, default=600.0, help="seconds per GPU batch point (fresh process)")
     p.add_argument("--vmap-timeout", type=float, default=90.0,
                    help="seconds per CPU vmap point (compile + one run) before it is stopped and reported as a bound")
     p.add_argument("--loop-max", type=int, default=256, help="largest batch timed as a plain loop")
@@ -343,6 +347,8 @@ def main(argv=None):
     rec("squeeze", "core with OpenBLAS limited to 1 thread (threadpoolctl)", seconds=t_1b, rows=n_rows,
         per_row_ms=1e3 * t_1b / n_rows, note="the squeeze's LAPACK calls are tiny; BLAS threads only wait")
     cfg_fused = dataclasses.replace(cfg, fused=True)
+    if a.gpu_only:
+        return gpu_section(a, rows, rec, info)
     t = time.perf_counter()
     core_f = G._run.lower(op0, gr, cfg_fused).compile()
     rec("compile", "in this process, the loop as one kernel (Settings.fused)", seconds=time.perf_counter() - t)
@@ -468,24 +474,33 @@ def main(argv=None):
                     per_grasp_ms=1e3 * dt / B, evals_per_min=60 * B / dt,
                     ratio_to_loop=(dt / B) / loop_pg if loop_pg else "", target=TARGETS["evals_per_min"])
 
-    # ---- the GPU, where there is one
-    if jax.devices()[0].platform == "gpu":
-        for B in a.gpu_batches:
-            r, to = sub(["vmap", B, 3], 600)
-            if len(r) >= 2:
-                rec("gpu", f"jax.vmap of the core on {jax.devices()[0].device_kind}", batch=B,
-                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
-                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], success=r[1]["success"],
-                    target=TARGETS["gpu"])
-            else:
-                rec("gpu", "jax.vmap of the core (failed or timed out)", batch=B, note=f"timed out: {to}")
-    else:
-        rec("gpu", "no GPU here: GPU batches 1/256/1024/4096 not run", note=jax.devices()[0].platform)
+    gpu_section(a, rows, rec, info)
 
+
+def gpu_section(a, rows, rec, info):
+    """``vmap`` of the core over ``a.gpu_batches`` candidate grips on the GPU, each batch in a
+    fresh process; writes the CSV and the plot (``throughput_gpu.*`` with ``--gpu-only``)."""
+    import jax
+
+    from squeeze import write_csv
     cols = ["section", "item", "batch", "seconds", "per_row_ms", "per_grasp_ms", "evals_per_min", "ratio_to_numpy",
             "ratio_to_loop", "compile_s", "trace_lower_s", "setup_s", "cache_hits", "rows", "mean_rows", "max_rows",
             "events", "bracket_iters", "success", "numpy_s", "rel_err_vs_jax", "nodes", "m", "load", "target", "note"]
-    name = "throughput_quick" if a.quick else "throughput"
+    name = "throughput_gpu" if a.gpu_only else "throughput_quick" if a.quick else "throughput"
+    if jax.devices()[0].platform == "gpu":
+        for B in a.gpu_batches:
+            r, to = sub(["vmap", B, a.gpu_reps], a.gpu_timeout)
+            if len(r) >= 2:
+                rec("gpu", f"jax.vmap of the core on {jax.devices()[0].device_kind}", batch=B,
+                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
+                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], mean_rows=r[1]["mean_rows"],
+                    success=r[1]["success"], target=TARGETS["gpu"])
+            else:
+                rec("gpu", "jax.vmap of the core (failed or timed out)", batch=B,
+                    compile_s=r[0]["compile_s"] if r else "", note=f"timed out after {a.gpu_timeout:.0f} s: {to}")
+            write_csv(os.path.join(a.out, name + ".csv"), rows, cols, info)    # a stopped run keeps its points
+    else:
+        rec("gpu", "no GPU here: GPU batches 1/256/1024/4096 not run", note=jax.devices()[0].platform)
     write_csv(os.path.join(a.out, name + ".csv"), rows, cols, info)
     plot(rows, os.path.join(a.out, name + ".png"), info)
     report(rows)
