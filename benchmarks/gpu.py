@@ -47,6 +47,8 @@ def main(argv=None):
     p.add_argument("--max-edge", type=float, nargs="+", default=[None])
     p.add_argument("--reps", type=int, default=3)
     p.add_argument("--x32", action="store_true", help="float32 instead of float64")
+    p.add_argument("--eager", action="store_true",
+                   help="an eager squeeze's contact slots (32, 8 sliding) instead of the traced default (64)")
     p.add_argument("--out", default=os.path.join(HERE, "results"))
     a = p.parse_args(argv)
 
@@ -66,7 +68,7 @@ def main(argv=None):
         op = sc.operator()
         op0 = dataclasses.replace(op, field=None)
         gr = G.grasp_of(sc, op)
-        cfg = G.config_of(sc)
+        cfg = G.eager_config(sc, op) if a.eager else G.config_of(sc)
         pos = np.full(int(np.max(np.asarray(op.nodes))) + 1, -1)
         pos[np.asarray(op.nodes)] = np.arange(op.m)
         for plat in plats:
@@ -94,16 +96,17 @@ def main(argv=None):
                     ts.append(time.perf_counter() - t)
                 status, count = np.asarray(out[0]), np.asarray(out[1])
                 r = dict(device=f"{plat}:{getattr(dev, 'device_kind', '')}", nodes=sc.mesh.n, boundary=sc.mesh.m,
-                         dtype="float32" if a.x32 else "float64", batch=B, compile_s=tc, run_s=min(ts),
+                         dtype="float32" if a.x32 else "float64", slots=cfg.capacity, batch=B, compile_s=tc,
+                         run_s=min(ts),
                          per_grasp_ms=1e3 * min(ts) / B, max_rows=int(count.max()),
                          success=int((status == 0).sum()), load=load1())
                 rows.append(r)
                 print(r, flush=True)
                 save(rows, a.out, info)   # after every point: a timed-out run keeps what it measured
-    print("\n| device | nodes | m | batch | compile [s] | run [s] | per grasp [ms] | max rows | success | load |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("\n| device | nodes | m | slots | batch | compile [s] | run [s] | per grasp [ms] | max rows | success | load |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {r['device']} | {r['nodes']} | {r['boundary']} | {r['batch']} | {r['compile_s']:.1f} | "
+        print(f"| {r['device']} | {r['nodes']} | {r['boundary']} | {r['slots']} | {r['batch']} | {r['compile_s']:.1f} | "
               f"{r['run_s']:.3f} | {r['per_grasp_ms']:.2f} | {r['max_rows']} | {r['success']}/{r['batch']} | "
               f"{r['load']:.1f} |")
 

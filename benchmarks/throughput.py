@@ -22,7 +22,9 @@ stick/slip, 15 mm, float64), in one run:
   compile or cache load), and :func:`jaxsqueeze.batch.split_vmap` in a fresh process with one
   host device per core (the batch split over them, each device vmapping its chunk); evaluations
   per minute.
-* ``gpu``: where ``jax.devices()[0].platform == "gpu"``, ``vmap`` at 1/256/1,024/4,096.
+* ``gpu``: where ``jax.devices()[0].platform == "gpu"``, ``vmap`` at 1/256/1,024/4,096, with the
+  traced default of 64 contact slots and with ``Settings(capacity=32, sliding_capacity=8)``
+  (``--gpu-only``: the scene, one squeeze and this section alone; ``throughput_gpu.*``).
 
 Every row records the 1-minute load average. Writes ``results/throughput.csv`` and
 ``results/throughput.png`` (``throughput_quick.*`` with ``--quick``).
@@ -233,7 +235,7 @@ def worker(argv):
         t0 = time.perf_counter()
         res = jsq.squeeze(foam())       # the operator build, validation, compile, run, field, trim
         print(json.dumps(dict(first_s=time.perf_counter() - t0, programs=len(events), rows=int(res.count))), flush=True)
-    elif kind in ("vmap", "split"):        # vmap B [reps] / split B [reps [eager | fused]]
+    elif kind in ("vmap", "split"):        # vmap B [reps [eager | fused]] / split B [reps [eager | fused]]
         import jax.numpy as jnp
 
         from jaxsqueeze.batch import split_vmap
@@ -488,17 +490,19 @@ def gpu_section(a, rows, rec, info):
             "events", "bracket_iters", "success", "numpy_s", "rel_err_vs_jax", "nodes", "m", "load", "target", "note"]
     name = "throughput_gpu" if a.gpu_only else "throughput_quick" if a.quick else "throughput"
     if jax.devices()[0].platform == "gpu":
-        for B in a.gpu_batches:
-            r, to = sub(["vmap", B, a.gpu_reps], a.gpu_timeout)
-            if len(r) >= 2:
-                rec("gpu", f"jax.vmap of the core on {jax.devices()[0].device_kind}", batch=B,
-                    compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
-                    evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], mean_rows=r[1]["mean_rows"],
-                    success=r[1]["success"], target=TARGETS["gpu"])
-            else:
-                rec("gpu", "jax.vmap of the core (failed or timed out)", batch=B,
-                    compile_s=r[0]["compile_s"] if r else "", note=f"timed out after {a.gpu_timeout:.0f} s: {to}")
-            write_csv(os.path.join(a.out, name + ".csv"), rows, cols, info)    # a stopped run keeps its points
+        kind = jax.devices()[0].device_kind
+        for variant, what in ((), "the traced default: 64 slots"), (("eager",), "Settings(capacity=32, sliding_capacity=8)"):
+            for B in a.gpu_batches:
+                r, to = sub(["vmap", B, a.gpu_reps, *variant], a.gpu_timeout)
+                if len(r) >= 2:
+                    rec("gpu", f"jax.vmap of the core on {kind}, {what}", batch=B,
+                        compile_s=r[0]["compile_s"], seconds=r[1]["run_s"], per_grasp_ms=1e3 * r[1]["run_s"] / B,
+                        evals_per_min=60 * B / r[1]["run_s"], max_rows=r[1]["max_rows"], mean_rows=r[1]["mean_rows"],
+                        success=r[1]["success"], target=TARGETS["gpu"])
+                else:
+                    rec("gpu", f"jax.vmap of the core on {kind}, {what} (failed or timed out)", batch=B,
+                        compile_s=r[0]["compile_s"] if r else "", note=f"timed out after {a.gpu_timeout:.0f} s: {to}")
+                write_csv(os.path.join(a.out, name + ".csv"), rows, cols, info)    # a stopped run keeps its points
     else:
         rec("gpu", "no GPU here: GPU batches 1/256/1024/4096 not run", note=jax.devices()[0].platform)
     write_csv(os.path.join(a.out, name + ".csv"), rows, cols, info)
