@@ -491,7 +491,8 @@ def gpu_section(a, rows, rec, info):
     name = "throughput_gpu" if a.gpu_only else "throughput_quick" if a.quick else "throughput"
     if jax.devices()[0].platform == "gpu":
         kind = jax.devices()[0].device_kind
-        for variant, what in ((), "the traced default: 64 slots"), (("eager",), "Settings(capacity=32, sliding_capacity=8)"):
+        for variant, what in (((), "the traced default: 64 slots"),
+                              (("eager",), "Settings(capacity=32, sliding_capacity=8)")):
             for B in a.gpu_batches:
                 r, to = sub(["vmap", B, a.gpu_reps, *variant], a.gpu_timeout)
                 if len(r) >= 2:
