@@ -473,13 +473,9 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     errs.raise_if_any()                                   # everything below needs all of the above
 
     # grip → nodes
-    from ..simulation.scene import nearest_boundary_node
     if grip_points is not None:
-        with warnings_module.catch_warnings():        # a tie: _check_grip_points says it in the file's terms
-            warnings_module.simplefilter("ignore")
-            grip = tuple(nearest_boundary_node(mesh, p) for p in grip_points)
+        grip = _grip_nodes(errs, warnings, mesh, grip_points)
         gkey = "grip.points"
-        warnings.extend(_check_grip_points(errs, mesh, grip_points, grip))
         if grip[0] == grip[1]:
             errs.add(SceneFileError("grip.points", f"both points are nearest to the same boundary node {grip[0]}"))
     elif getattr(mesh, "source", None) is not None and np.any(mesh.source != np.arange(mesh.n)):
@@ -579,31 +575,25 @@ def _fingers(fin):
         raise _wrap(e, "fingers", {"radius": "fingers.radius", "rotation": "fingers.rotation"}) from None
 
 
-def _check_grip_points(errs, mesh, points, grip) -> list[str]:
-    """A grip point must lie within twice the boundary edges next to the boundary node it
-    snaps to (not 50 m off the object, not at its centre). Returns warnings for a point as
-    near a neighbour of that node as to the node itself (which one wins is round-off)."""
-    P = np.asarray(mesh.points) + np.asarray(mesh.offset)
-    b = np.asarray(mesh.boundary) if hasattr(mesh, "loops") and hasattr(mesh, "triangles") else np.arange(len(P))
-    loops = np.split(b, np.cumsum(mesh.loops)[:-1]) if hasattr(mesh, "loops") else [b]
-    nxt = np.concatenate([np.roll(lp, -1) for lp in loops])
-    prv = np.concatenate([np.roll(lp, 1) for lp in loops])
-    where = {int(v): k for k, v in enumerate(b)}
-    said = []
-    for k, (xy, node) in enumerate(zip(points, grip)):
-        i = where[int(node)]
-        h = max(np.linalg.norm(P[nxt[i]] - P[node]), np.linalg.norm(P[prv[i]] - P[node]))
-        d = float(np.linalg.norm(P[node] - xy))
-        if d > 2 * h:
-            errs.add(SceneFileError("grip.points", f"point {k + 1} {list(map(float, xy))} is {d:.3g} m from the "
-                                    f"nearest boundary node {node} at {P[node].tolist()}, more than twice the "
-                                    f"boundary edges there ({h:.3g} m): put the grip points on the object's outline"))
-        for other in (nxt[i], prv[i]):
-            if abs(float(np.linalg.norm(P[other] - xy)) - d) <= 1e-6 * h:
-                said.append(f"grip.points: point {k + 1} {list(map(float, xy))} is as near boundary node {other} "
-                            f"as node {node}, which is used (a tie broken by round-off); put the point on the node "
-                            "you mean")
-    return said
+def _grip_nodes(errs, warnings, mesh, points) -> tuple:
+    """The boundary nodes the grip points snap to (:func:`~jaxsqueeze.simulation.scene.snap`).
+    A point must lie within twice the boundary edges next to its node (not 50 m off the object,
+    not at its centre); a point as near another node as to its own gets a warning (which one
+    wins is round-off)."""
+    from ..simulation.scene import snap
+    grip = []
+    for k, xy in enumerate(points):
+        s = snap(mesh, xy)
+        where = f"point {k + 1} {list(map(float, xy))}"
+        if s.off_outline:
+            errs.add(SceneFileError("grip.points", f"{where} is {s.distance:.3g} m from the nearest boundary node "
+                                    f"{s.node} at {s.at}, more than twice the boundary edges "
+                                    f"there ({s.edge:.3g} m): put the grip points on the object's outline"))
+        elif s.tie is not None:
+            warnings.append(f"grip.points: {where} is as near boundary node {s.tie} as node {s.node}, which is "
+                            "used (a tie broken by round-off); put the point on the node you mean")
+        grip.append(s.node)
+    return tuple(grip)
 
 
 def _grip_distance(mesh, grip) -> float:

@@ -5,7 +5,7 @@ import dataclasses
 import warnings
 import weakref
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
@@ -446,13 +446,28 @@ def _boundary_edge_at(pts, loops, i: int) -> float:
     return float(np.linalg.norm(pts[pair] - pts[i], axis=1).max())
 
 
-def nearest_boundary_node(obj, xy) -> int:
-    """Boundary node of a mesh or band nearest to ``xy`` (2,) in the caller's frame [m]
+class Snap(NamedTuple):
+    """Where a point ``xy`` [m] lands on a boundary (:func:`snap`): the nearest boundary node,
+    its position [m] in the caller's frame, its distance [m], the longer boundary edge there
+    [m], and a node equally near (a tie broken by round-off) or None."""
+
+    node: int
+    at: list
+    distance: float
+    edge: float
+    tie: int | None
+
+    @property
+    def off_outline(self) -> bool:
+        """The point is farther from its node than twice the boundary edges there."""
+        return self.distance > 2 * self.edge
+
+
+def snap(obj, xy) -> Snap:
+    """The boundary node of a mesh or band nearest to ``xy`` (2,) in the caller's frame [m]
     (``points + offset``; both :class:`Mesh` and :class:`~jaxsqueeze.band.Band` keep the node
-    centroid at the origin and the caller's frame in ``offset``). Warns when two nodes are
-    equally near (a point midway between nodes: which one is taken decides the grip's slant),
-    and when the nearest is farther than twice the boundary edges there (a point off the
-    outline, as the scene files refuse: e.g. millimetres among metres)."""
+    centroid at the origin and the caller's frame in ``offset``), with what a caller should
+    say about it (:class:`Snap`). Among equally near nodes the first in boundary order wins."""
     xy = np.asarray(xy, float)
     if isinstance(obj, Mesh):
         pts, nodes, loops = obj.points[obj.boundary] + obj.offset, np.asarray(obj.boundary), obj.loops
@@ -460,14 +475,26 @@ def nearest_boundary_node(obj, xy) -> int:
         pts, nodes, loops = obj.points + obj.offset, np.arange(obj.m), (obj.m,)
     dist = np.linalg.norm(pts - xy, axis=1)
     k = np.argsort(dist, kind="stable")[:2]       # (argmin's choice among equals: the first)
-    h = _boundary_edge_at(pts, loops, int(k[0]))
-    if dist[k[0]] > 2 * h:
-        warnings.warn(f"{xy.tolist()} is {dist[k[0]]:.3g} m from the nearest boundary node {int(nodes[k[0]])} at "
-                      f"{pts[k[0]].tolist()}, more than twice the boundary edges there ({h:.3g} m); it is taken, but "
-                      "a grip point belongs on the object's outline (lengths in metres, in the mesh's frame)",
-                      stacklevel=2)
-    elif len(k) == 2 and dist[k[1]] - dist[k[0]] <= 1e-6 * dist[k[1]]:      # (the scene files' tie rule)
-        warnings.warn(f"boundary nodes {int(nodes[k[0]])} and {int(nodes[k[1]])} are equally near {xy.tolist()} "
-                      f"({dist[k[0]]:.3g} m), node {int(nodes[k[0]])} is taken; for a node at that point mesh with "
-                      "refine_near=[point] (shapes) or pick the node yourself", stacklevel=2)
-    return int(nodes[k[0]])
+    tie = len(k) == 2 and dist[k[1]] - dist[k[0]] <= 1e-6 * dist[k[1]]
+    return Snap(int(nodes[k[0]]), pts[k[0]].tolist(), float(dist[k[0]]), _boundary_edge_at(pts, loops, int(k[0])),
+                int(nodes[k[1]]) if tie else None)
+
+
+def nearest_boundary_node(obj, xy) -> int:
+    """Boundary node of a mesh or band nearest to ``xy`` (2,) in the caller's frame [m]
+    (:func:`snap`). Warns when the nearest is farther than twice the boundary edges there (a
+    point off the outline, as the scene files refuse: e.g. millimetres among metres), and
+    otherwise when two nodes are equally near (a point midway between nodes: which one is
+    taken decides the grip's slant)."""
+    xy = np.asarray(xy, float)
+    s = snap(obj, xy)
+    if s.off_outline:
+        warnings.warn(f"{xy.tolist()} is {s.distance:.3g} m from the nearest boundary node {s.node} at "
+                      f"{s.at}, more than twice the boundary edges there ({s.edge:.3g} m); it is "
+                      "taken, but a grip point belongs on the object's outline (lengths in metres, in the mesh's "
+                      "frame)", stacklevel=2)
+    elif s.tie is not None:
+        warnings.warn(f"boundary nodes {s.node} and {s.tie} are equally near {xy.tolist()} ({s.distance:.3g} m), "
+                      f"node {s.node} is taken; for a node at that point mesh with refine_near=[point] (shapes) "
+                      "or pick the node yourself", stacklevel=2)
+    return s.node
