@@ -532,6 +532,8 @@ def plot(rows, path, info):
         b, v = zip(*sorted(pts))
         ax[0].loglog(b, v, "v--" if "bound" in key else "o-", label=key)
     ax[0].axhline(6.0, color="k", lw=0.8, ls=":", label="10,000 evaluations/min")
+    if any(r["section"] == "gpu" and "batch" in r for r in rows):
+        ax[0].axhline(0.5, color="r", lw=0.8, ls=":", label="GPU target 0.5 ms (B >= 1,024)")
     ax[0].set_xlabel("batch (grasps)")
     ax[0].set_ylabel("wall time per grasp [ms]")
     ax[0].grid(True, which="both", alpha=0.3)
