@@ -13,6 +13,8 @@ The main names are imported here. The module names of version 0.1 (``jaxsqueeze.
 ``jaxsqueeze.scene``, ``jaxsqueeze.views``, ...) keep working as aliases of their new homes;
 the heavier ones (plots, export, cones, scenefile, cli) load on first use.
 """
+__version__ = "0.2.0"      # the one place it is written: pyproject.toml reads it
+
 import importlib
 import importlib.abc
 import importlib.util
@@ -55,7 +57,6 @@ def __getattr__(name):
         plan = importlib.import_module(f"{__name__}.plan")
         return plan if name == "plan" else getattr(plan, name)
     raise AttributeError(f"module 'jaxsqueeze' has no attribute {name!r}")
-__version__ = "0.2.0"
 
 
 class _AliasFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):

@@ -85,6 +85,8 @@ def _parser() -> argparse.ArgumentParser:
         description="Simulate a two-finger squeeze grasp of a soft planar object (Guo, Lin & Jia) "
                     "and write a summary, plots and ParaView files.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    from .. import __version__
+    p.add_argument("--version", action="version", version=f"jaxsqueeze {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 

@@ -157,6 +157,19 @@ def test_help_subprocess():
     assert "jaxsqueeze run" in r.stdout and "examples:" in r.stdout
 
 
+def test_version_is_one_number_everywhere(capsys):
+    """`jaxsqueeze --version`, jaxsqueeze.__version__ and the installed package's metadata
+    (pyproject.toml reads it from the package) agree; they said 0.2.0 and 0.1.0."""
+    import importlib.metadata
+
+    import jaxsqueeze
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--version"])
+    assert e.value.code == 0
+    assert capsys.readouterr().out.strip() == f"jaxsqueeze {jaxsqueeze.__version__}"
+    assert importlib.metadata.version("jaxsqueeze") == jaxsqueeze.__version__
+
+
 def test_demo_scene_is_packaged(capsys):
     assert cli.main(["demo", "--print-scene"]) == 0
     text = capsys.readouterr().out
