@@ -76,6 +76,12 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     """
     res = views.trimmed(res)
     mesh = views.check_object(res, mesh)     # (a scene gives its mesh)
+    zoom = _zoom(zoom)
+    if displacement is not None:
+        displacement = np.asarray(displacement, float)
+        if displacement.shape != np.shape(mesh.points) or not np.all(np.isfinite(displacement)):
+            raise ValueError(f"displacement must be finite (n, 2) = {np.shape(mesh.points)} nodal displacements [m] of "
+                             f"the mesh, got shape {displacement.shape}; see jaxsqueeze.views.row_displacement")
     if forces is None:
         forces = _is_band(mesh)
     r = views.row_index(res, row)
@@ -159,8 +165,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             t = sign[:, None] * np.stack([-np.sin(world), np.cos(world)], axis=1)
             L = 0.3 * rad * MM
             if zoom is not None:   # arrows a tenth of the close-up's width
-                L = 0.1 * float(np.diff(ax.get_xlim())[0]) if np.ndim(zoom[0]) != 1 or np.ndim(zoom[1]) != 0 \
-                    else 0.2 * float(zoom[1]) * MM
+                L = 0.1 * float(np.diff(ax.get_xlim())[0]) if np.ndim(zoom[1]) != 0 else 0.2 * zoom[1] * MM
             ax.quiver(X_b[k, 0], X_b[k, 1], t[:, 0] * L, t[:, 1] * L, color=SLIP_COLOR, angles="xy",
                       scale_units="xy", scale=1, width=0.006, zorder=7)
     if forces:
@@ -193,7 +198,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     if zoom is not None:
-        if np.ndim(zoom[0]) == 1 and np.size(zoom[0]) == 2 and np.ndim(zoom[1]) == 0:
+        if np.ndim(zoom[1]) == 0:
             (cx, cy), h = zoom
             ax.set_xlim((cx - h) * MM, (cx + h) * MM)
             ax.set_ylim((cy - h) * MM, (cy + h) * MM)
@@ -208,8 +213,27 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     return fig
 
 
+def _zoom(zoom):
+    """``zoom`` of :func:`plot_deformed` checked: None, ((xmin, xmax), (ymin, ymax)) [mm] with
+    xmin < xmax and ymin < ymax, or ((x, y) [m], half width [m] > 0); all finite."""
+    if zoom is None:
+        return None
+    try:
+        a, b = (np.asarray(z, float) for z in zoom)
+    except (TypeError, ValueError):
+        a = b = None
+    box = a is not None and a.shape == (2,) and b.shape == (2,) and a[0] < a[1] and b[0] < b[1]
+    centre = a is not None and a.shape == (2,) and b.shape == () and b > 0
+    if not (box or centre) or not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise ValueError(f"zoom={zoom!r}: expected ((xmin, xmax), (ymin, ymax)) in mm with min < max, or a centre "
+                         "and half width ((x, y), half) in m with half > 0, all finite")
+    return (tuple(a), tuple(b)) if box else (tuple(a), float(b))
+
+
 def default_rows(res, count: int = 4) -> list[int]:
     """Rows nearest to evenly spaced fractions of the final depth (1/count ... 1)."""
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"count={count!r}: expected an integer >= 1 (how many rows)")
     res = views.trimmed(res)
     depth = np.asarray(res.depth, float)
     targets = depth[-1] * np.arange(1, count + 1) / count
@@ -227,6 +251,9 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
     res = views.trimmed(res)
     mesh = None if mesh is None else views.check_object(res, mesh)
     rows = default_rows(res) if rows is None else [views.row_index(res, r) for r in rows]
+    if not rows:
+        raise ValueError("rows is empty: name at least one recorded row, or pass rows=None for the rows "
+                         "nearest 25, 50, 75 and 100 % of the final depth")
     fig = Figure(figsize=(10, 7), dpi=DPI, layout="constrained")
     axs = fig.subplots(2, 2, sharex="col")
     cmap = _cmap(len(rows))

@@ -131,3 +131,22 @@ def test_views_plots_and_exports_refuse_another_object_of_the_same_node_counts(o
             plots.plot_deformed(res, scene, row=row)
     assert views.row_index(res, np.int64(-1)) == len(res.depth) - 1
     assert views.summary(res, scene)["status"] == "SUCCESS"
+    # a zoom of the wrong form failed with "'int' object is not subscriptable", a NaN one drew
+    # nothing; a displacement of the wrong shape failed in numpy's broadcasting; rows=[] drew
+    # an empty figure; default_rows(res, 0) returned no rows
+    for zoom in (-1, float("nan"), ((0, 1), (2, 1)), ((0, 0), -0.01), ((0, float("nan")), 0.01), "ab", (1, 2, 3)):
+        with pytest.raises(ValueError, match="expected .*xmin, xmax.* with min < max, or a centre"):
+            plots.plot_deformed(res, scene, zoom=zoom)
+    x, y = np.asarray(res.centres[-1][0], float) + np.asarray(scene.mesh.offset)
+    for zoom in (((x - 0.02) * 1e3, (x + 0.02) * 1e3), ((y - 0.02) * 1e3, (y + 0.02) * 1e3)), ((x, y), 0.02):
+        ax = plots.plot_deformed(res, scene, zoom=zoom).axes[0]
+        np.testing.assert_allclose(ax.get_xlim(), [(x - 0.02) * 1e3, (x + 0.02) * 1e3])
+    for u in (np.zeros((3, 2)), np.full(np.shape(scene.mesh.points), np.nan)):
+        with pytest.raises(ValueError, match=r"displacement must be finite \(n, 2\)"):
+            plots.plot_deformed(res, scene, displacement=u)
+    with pytest.raises(ValueError, match="rows is empty"):
+        plots.plot_force_profile(res, rows=[])
+    for count in (0, -3, 1.5, True):
+        with pytest.raises(ValueError, match="expected an integer >= 1"):
+            plots.default_rows(res, count)
+    assert plots.default_rows(res, 1) == [len(res.depth) - 1]
