@@ -17,8 +17,15 @@ def plot_grasp_map(gmap, search=None, label: str = "quality", ax=None) -> Figure
     :class:`~jaxsqueeze.plan.Search` adds one path per start (circles: start, crosses: end),
     each placement drawn with both finger orders, like the mirrored map.
     """
+    from ..plan.search import GraspMap, Search
     from ..simulation.status import Status
 
+    if not isinstance(gmap, GraspMap):
+        raise TypeError(f"plot_grasp_map draws a GraspMap (jaxsqueeze.grasp_map(scene, ...)), got "
+                        f"{type(gmap).__name__}")
+    if search is not None and not isinstance(search, Search):
+        raise TypeError(f"search= takes a Search (jaxsqueeze.optimize_placement(scene, ...)), got "
+                        f"{type(search).__name__}")
     if ax is None:
         fig = Figure(figsize=(6.4, 5.4), dpi=110)
         ax = fig.add_subplot()

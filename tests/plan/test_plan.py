@@ -583,3 +583,20 @@ def test_search_reaches_the_best_of_the_exhaustive_map(name):
     res = jsq.squeeze(sc.replace(placement=found.best), op=op)
     assert res.outcome == jsq.Status.SUCCESS
     np.testing.assert_allclose(float(Q.squeeze_work(res)), found.quality, rtol=1e-9)
+
+
+def test_plot_grasp_map_names_what_it_draws():
+    """plot_grasp_map(a squeeze result) failed with "'SqueezeResult' object has no attribute 's'"."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from jaxsqueeze.plan.search import GraspMap
+    from jaxsqueeze.post.maps import plot_grasp_map
+    with pytest.raises(TypeError, match=r"draws a GraspMap \(jaxsqueeze.grasp_map\(scene, ...\)\), got dict"):
+        plot_grasp_map({"s": [0.0]})
+    s = np.array([0.0, 0.01, 0.02])
+    status = np.where(np.eye(3, dtype=bool), jsq.Status.INFEASIBLE_GRIP, jsq.Status.SUCCESS)
+    gmap = GraspMap(s, np.ones((3, 3)), status, np.ones((3, 3)), np.zeros((3, 3)), 0.0, np.array([[0.0, 0.01, 0.0]]), 6)
+    with pytest.raises(TypeError, match="search= takes a Search"):
+        plot_grasp_map(gmap, search="x")
+    ax = plot_grasp_map(gmap).axes[0]
+    assert len(ax.collections) == 2          # the grey infeasible cells and the quality

@@ -150,3 +150,18 @@ def test_views_plots_and_exports_refuse_another_object_of_the_same_node_counts(o
         with pytest.raises(ValueError, match="expected an integer >= 1"):
             plots.default_rows(res, count)
     assert plots.default_rows(res, 1) == [len(res.depth) - 1]
+
+
+def test_cone_axes_refuse_a_friction_no_scene_could_have(offset):
+    """cone_axes(friction=-1) or NaN gave margins arctan(-1) - angle without a word; a given
+    friction replaces the scene's in the margins and nowhere else."""
+    from jaxsqueeze.post import cones
+    scene, op, res = offset
+    for bad in (-1, float("nan"), float("inf"), "0.5", 0.5 + 1j, [0.5], True):
+        with pytest.raises(ValueError, match="friction"):
+            cones.cone_axes(res, scene, friction=bad)
+    own, given = cones.cone_axes(res, scene), cones.cone_axes(res, scene, friction=0.3)
+    ok = np.isfinite(own.margin)
+    assert ok.sum() > 0
+    np.testing.assert_allclose((own.margin - given.margin)[ok], np.arctan(0.5) - np.arctan(0.3), rtol=1e-12)
+    np.testing.assert_array_equal(own.axis, given.axis)
