@@ -106,8 +106,12 @@ def lookup(table, nodes):
 
 def positions(boundary_nodes, nodes) -> np.ndarray:
     """Eager positions of node indices ``nodes`` among ``boundary_nodes``; raises ``ValueError``
-    naming every node that is not on the boundary."""
-    nodes = np.asarray(nodes, dtype=np.int64)
+    naming every node that is not on the boundary, or any index that is not an integer."""
+    given = np.asarray(nodes)
+    if given.size and given.dtype.kind not in "iu":
+        raise ValueError(f"node indices must be integers, got {given.tolist()} ({given.dtype}); use boundary node "
+                         "numbers (mesh.boundary, or Scene.nearest_boundary_node)")
+    nodes = given.astype(np.int64)
     b = np.asarray(boundary_nodes)
     n = int(max(b.max(initial=0), nodes.max(initial=0))) + 1
     pos = np.asarray(lookup(position_table(b, n), nodes))

@@ -83,6 +83,10 @@ def deform(op: Compliance, nodes, displacements) -> Deformation:
     Returns:
         :class:`Deformation` with forces [N], g, and the displacement of every node [m].
     """
+    if np.ndim(nodes) != 1:
+        raise ValueError(f"nodes must be a flat list of s boundary node indices, got shape {np.shape(nodes)}")
+    if is_concrete(displacements) and np.asarray(displacements).dtype.kind not in "iuf":
+        raise ValueError(f"displacements must be real numbers [m]; got dtype {np.asarray(displacements).dtype}")
     slots = boundary_slots(op, nodes)
     s = slots.size
     if s < 2:

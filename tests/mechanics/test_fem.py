@@ -440,6 +440,15 @@ def test_deform_errors():
         jsq.deform(op, b[:2], np.array([[0.0, 0.0], [np.nan, 0.0]]))
     with pytest.raises(ValueError, match=r"method"):
         fem.compliance(mesh, MAT, "cholesky")
+    # node 2.5 was read as node 2, a complex displacement lost its imaginary part with only
+    # numpy's ComplexWarning, and a (1, 2) array of nodes was flattened
+    with pytest.raises(ValueError, match=r"node indices must be integers, got \[.*2.5\] \(float64\)"):
+        jsq.deform(op, [float(b[0]), 2.5], np.zeros((2, 2)))
+    for bad in (np.zeros((2, 2)) + 1e-3j, [["a", "b"], ["c", "d"]], np.zeros((2, 2), bool)):
+        with pytest.raises(ValueError, match=r"displacements must be real numbers \[m\]; got dtype"):
+            jsq.deform(op, b[:2], bad)
+    with pytest.raises(ValueError, match=r"flat list of s boundary node indices, got shape \(1, 2\)"):
+        jsq.deform(op, [b[:2]], np.zeros((2, 2)))
 
 
 @pytest.mark.parametrize("kwargs, field", [
