@@ -9,6 +9,9 @@ Layers, each importing only from the ones above it in this list:
 * :mod:`jaxsqueeze.post`       views, cones, plots, export
 * :mod:`jaxsqueeze.io`         scenefile, cli
 
+``jaxsqueeze.tracing`` (is a value a tracer) and ``jaxsqueeze.numbers`` (is an input made of real
+numbers) serve every layer.
+
 The main names are imported here. The module names of version 0.1 (``jaxsqueeze.fem``,
 ``jaxsqueeze.scene``, ``jaxsqueeze.views``, ...) keep working as aliases of their new homes;
 the heavier ones (plots, export, cones, scenefile, cli) load on first use.

@@ -27,6 +27,8 @@ from typing import Callable
 
 import numpy as np
 
+from ..numbers import real_array
+
 Curve = Callable[[np.ndarray], np.ndarray]
 
 
@@ -102,7 +104,7 @@ def arclength_params(curve: Curve, m: int, dense: int | None = None) -> np.ndarr
     """
     n = max(64 * m, 8192) if dense is None else int(dense)
     p = np.arange(n + 1) / n
-    xy = np.asarray(curve(p), dtype=np.float64)
+    xy = real_array(curve(p), "the curve's points", "m")
     if xy.shape != (n + 1, 2) or not np.all(np.isfinite(xy)):
         what = f"shape {xy.shape}" if xy.shape != (n + 1, 2) else "points that are not finite"
         raise ValueError(f"the curve maps k parameters in [0, 1] to finite (k, 2) points [m]; for {n + 1} it "

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..numbers import real_array
 from ..tracing import caller_level
 from .boundary import crossing, neighbours
 
@@ -161,15 +162,8 @@ def _few(items, k: int = 8) -> str:
 
 def _check_arrays(points, triangles):
     """Shapes, finiteness and index range; returns float64 (n, 2) and int64 (t, 3)."""
-    for name, a in (("points", points), ("triangles", triangles)):
-        kind = np.asarray(a).dtype.kind
-        if kind in "bc":     # a cast would drop the imaginary part or read True as 1
-            raise ValueError(f"{name} must be real numbers; got dtype {np.asarray(a).dtype}")
-    try:
-        pts = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"points must be an (n, 2) array of numbers (x, y per node [m]); got {points!r:.60}: {e}") from None
-    tri = np.asarray(triangles)
+    pts = real_array(points, "points", "m")
+    tri = np.asarray(triangles) if np.asarray(triangles).dtype.kind in "iu" else real_array(triangles, "triangles")
     if pts.size == 0 or tri.size == 0:
         raise ValueError(f"empty mesh: points {pts.shape}, triangles {tri.shape}; "
                          "a mesh needs (n, 2) points and at least one (3,) triangle")

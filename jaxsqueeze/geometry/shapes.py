@@ -41,6 +41,7 @@ import warnings
 import numpy as np
 import triangle as tr
 
+from ..numbers import real_array
 from ..tracing import caller_level
 from .mesh import Mesh, too_thin
 
@@ -146,7 +147,7 @@ def _positive(x, name) -> float:
 
 
 def _center(center) -> np.ndarray:
-    c = np.asarray(center, dtype=np.float64)
+    c = real_array(center, "center", "m")
     if c.shape != (2,) or not np.all(np.isfinite(c)):
         raise ValueError(f"center must be a finite (x, y) pair; got {center!r}")
     return c
@@ -154,10 +155,7 @@ def _center(center) -> np.ndarray:
 
 def _as_ring(vertices, what) -> np.ndarray:
     """Validated (k, 2) float64 polygon, closing duplicate removed."""
-    try:
-        v = np.asarray(vertices, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{what} vertices must be (k, 2) numbers [m]; got {vertices!r:.80}") from None
+    v = real_array(vertices, f"{what} vertices", "m")
     if v.ndim != 2 or v.shape[1] != 2:
         raise ValueError(f"{what} vertices must have shape (k, 2); got {v.shape}")
     if len(v) > 3 and np.array_equal(v[0], v[-1]):

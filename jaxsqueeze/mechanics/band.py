@@ -83,6 +83,7 @@ from scipy.interpolate import CubicSpline
 from ..geometry.boundary import crossing
 from ..geometry.curves import arclength_params
 from ..geometry.mesh import ByContent
+from ..numbers import real_array
 from ..tracing import as_array, caller_level
 from .operator import Compliance, FieldMap, rigid_modes
 
@@ -260,7 +261,7 @@ class Band(ByContent):
         closer than :data:`COINCIDENT` of the mean spacing are an error (the spline's knots
         would coincide).
         """
-        xy = np.asarray(xy, dtype=np.float64)
+        xy = real_array(xy, "xy", "m")
         if xy.ndim == 2 and xy.shape[1:] == (2,) and len(xy) > MIN_NODES and np.all(np.isfinite(xy)):
             gaps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
             if np.linalg.norm(xy[-1] - xy[0]) <= COINCIDENT * gaps.mean():
@@ -313,10 +314,12 @@ class Band(ByContent):
         ``gamma(p)``: p in [0, 1) (k,) -> points (k, 2) [m], vectorized (see
         :mod:`jaxsqueeze.curves`). Node 0 is gamma(0).
         """
+        if not callable(gamma):
+            raise TypeError(f"gamma must be a function p -> (k, 2) points [m] of the curve, got {gamma!r}")
         if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < MIN_NODES:
             raise ValueError(f"a band needs an integer number of nodes m >= {MIN_NODES}, got {m!r}: {_FEW}")
         _check_size(m)
-        return cls.from_curve(np.asarray(gamma(arclength_params(gamma, m)), dtype=np.float64), width, height)
+        return cls.from_curve(np.asarray(gamma(arclength_params(gamma, m))), width, height)
 
     def to_xy(self) -> np.ndarray:
         """T (2m, ndof): nodal xy displacements (interleaved x0, y0, x1, ...) from band DOFs."""

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..geometry import boundary
+from ..numbers import real_array
 from ..tracing import is_concrete
 from .operator import Compliance, field_displacement
 
@@ -85,8 +86,8 @@ def deform(op: Compliance, nodes, displacements) -> Deformation:
     """
     if np.ndim(nodes) != 1:
         raise ValueError(f"nodes must be a flat list of s boundary node indices, got shape {np.shape(nodes)}")
-    if is_concrete(displacements) and np.asarray(displacements).dtype.kind not in "iuf":
-        raise ValueError(f"displacements must be real numbers [m]; got dtype {np.asarray(displacements).dtype}")
+    if is_concrete(displacements):
+        real_array(displacements, "displacements", "m")
     slots = boundary_slots(op, nodes)
     s = slots.size
     if s < 2:

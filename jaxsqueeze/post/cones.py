@@ -58,6 +58,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..numbers import real_array
 from ..simulation import validate
 from . import views
 from .views import FREE
@@ -207,11 +208,11 @@ def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) ->
         raise ValueError(f"axis={axis!r}; choose one of {AXES}")
     geo, op, E, mu = _unpack(obj)
     if friction is not None:
-        if isinstance(friction, bool) or np.ndim(friction) != 0 or np.asarray(friction).dtype.kind not in "iuf":
-            raise ValueError(f"friction={friction!r}: expected a real Coulomb coefficient mu >= 0 (or None: "
-                             "the scene's)")
-        validate.raise_if_invalid({"friction": float(friction)})
-        mu = float(friction)
+        mu = real_array(friction, "friction (a Coulomb coefficient, or None for the scene's)")
+        if mu.shape:
+            raise ValueError(f"friction={friction!r}: expected one Coulomb coefficient mu >= 0")
+        validate.raise_if_invalid({"friction": float(mu)})
+        mu = float(mu)
     P, loops = _geometry(geo, op)
     depth = np.asarray(res.depth, float)
     k = len(depth)

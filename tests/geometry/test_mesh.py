@@ -94,7 +94,7 @@ def test_boundary_index():
     (np.array([[0, 0], [1, 0], [1, np.inf], [0, 1.0]]), SQUARE_TRI, r"non-finite"),
     (SQUARE, np.array([[0, 1, 2], [0, 2, 4]]), r"out of range 0..3 in triangles 1"),
     (SQUARE, np.array([[0, 1, 2], [0, 2, -1]]), r"out of range"),
-    (SQUARE + 0.5j, SQUARE_TRI, r"points must be real numbers; got dtype complex128"),
+    (SQUARE + 0.5j, SQUARE_TRI, r"points must be real numbers \[m\]; got dtype complex128"),
     (SQUARE, SQUARE_TRI > 0, r"triangles must be real numbers; got dtype bool"),
     (np.array([[0, 0], [1, 0], [1, 1], [0, 1], [2, 2.0]]), np.array([[0, 1, 2], [0, 2, 3], [0, 2, 4]]),
      r"degenerate \(zero-area\) triangles 2"),
@@ -359,6 +359,13 @@ def test_refinement_makes_edges_shorter_near_point():
     (lambda: shapes.polygon("abc", max_edge=0.1), "outline vertices must be .* numbers"),     # numpy's words before
     (lambda: shapes.polygon(SQUARE, holes=["x"], max_edge=0.1), "hole 0 vertices must be .* numbers"),
     (lambda: shapes.rectangle(0.1 + 1j, 0.1, 0.01), "width must be one positive"),            # a TypeError before
+    # complex vertices lost their imaginary part with only numpy's ComplexWarning, True read as
+    # 1 m, text was parsed as numbers, and a complex centre failed inside float()
+    (lambda: shapes.polygon(SQUARE + 1e-3j, max_edge=0.1), r"outline vertices must be real numbers \[m\]; got dtype c"),
+    (lambda: shapes.polygon(SQUARE > 0.5, max_edge=0.1), r"outline vertices must be real numbers \[m\]; got dtype bool"),
+    (lambda: shapes.polygon(SQUARE.astype(str), max_edge=0.1), r"outline vertices must be real numbers \[m\]; got dtype <U"),
+    (lambda: shapes.polygon(SQUARE, holes=[SQUARE * 0.2 + 0.4 + 0j], max_edge=0.1), r"hole 0 vertices must be real"),
+    (lambda: shapes.rectangle(0.1, 0.1, 0.01, center=(1j, 0)), r"center must be real numbers \[m\]"),
 ])
 def test_shape_validation(call, match):
     with pytest.raises(ValueError, match=match):
@@ -428,8 +435,10 @@ def test_read_errors(tmp_path):
     meshio.write(path, meshio.Mesh(pts3 + [[0, 0, 0], [0, 0, np.nan], [0, 0, 0]], [("triangle", np.array([[0, 1, 2]]))]))
     with pytest.raises(ValueError, match=r"not planar: nodes 1"):
         read_mesh(path)
-    with pytest.raises(ValueError, match=r"points must be an \(n, 2\) array of numbers"):
+    with pytest.raises(ValueError, match=r"points must be real numbers \[m\]; got dtype <U3"):
         Mesh.from_arrays("abc", [[0, 1, 2]])
+    with pytest.raises(ValueError, match=r"points must be an array of real numbers \[m\]; got \[\[0, 0\], \[1\]"):
+        Mesh.from_arrays([[0, 0], [1], [0, 1]], [[0, 1, 2]])          # rows of unequal length
 
 
 # ----------------------------------------------------------------------------- issue 12: bad meshes

@@ -247,6 +247,20 @@ def test_bands_too_coarse_too_large_or_of_bad_size_are_refused(args, kw, match):
         Band.from_curve(curves.sample(curves.circle(0.04), 5))
 
 
+def test_band_points_must_be_real_numbers_and_its_curve_a_function():
+    """Complex points lost their imaginary part with only numpy's ComplexWarning (a band of the
+    real parts); a curve that is not a function failed with "'int' object is not callable"."""
+    xy = curves.sample(curves.circle(0.04), 32)
+    for bad in (xy + 1e-3j, xy.astype(str), xy > 0):
+        with pytest.raises(ValueError, match=r"xy must be real numbers \[m\]; got dtype"):
+            Band.from_curve(bad)
+    with pytest.raises(ValueError, match=r"the curve's points must be real numbers \[m\]; got dtype complex128"):
+        Band.from_function(lambda p: curves.circle(0.04)(p) + 0j, 32)
+    with pytest.raises(TypeError, match=r"gamma must be a function p -> \(k, 2\) points"):
+        Band.from_function(3, 32)
+    assert Band.from_curve(np.round(xy * 1e3).astype(int)).m == 32      # integer millimetres are numbers
+
+
 def test_a_wall_thicker_than_the_tightest_curvature_radius_warns():
     """The thin-wall beam model needs the wall thin against the radius of curvature: the paper's
     literal 5 mm wall on the 8 cm heart is thicker than the 2.2 mm radius at its cusps."""

@@ -1,0 +1,19 @@
+"""Eager check that an input is made of real numbers, before a cast to float could lose part
+of it (the imaginary part of a complex number, True read as 1, digits parsed from text)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def real_array(x, what: str, unit: str = "") -> np.ndarray:
+    """``x`` as a float64 array. Raises ``ValueError`` naming ``what`` (and its ``unit``, e.g.
+    "m") when ``x`` holds anything but integers and floats: complex numbers, booleans, text,
+    objects, or lists of unequal lengths."""
+    where = f" [{unit}]" if unit else ""
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be an array of real numbers{where}; got {x!r:.80}") from None
+    if a.dtype.kind not in "iuf":
+        raise ValueError(f"{what} must be real numbers{where}; got dtype {a.dtype}")
+    return a.astype(np.float64)
