@@ -36,6 +36,10 @@ are taken of the region as ordinary operations (the jvp of a kernel call can lea
 unused). :func:`top_level_trace` tells code traced for a library-compiled program (where
 the options hold) from code traced in a user's ``jit``.
 
+Every choice here and in the batch rules follows :func:`platform`, the platform a computation
+runs on, so that a squeeze pinned to the CPU on a GPU machine (``with
+jax.default_device(jax.devices("cpu")[0])``) is compiled and batched as on a CPU.
+
 Nothing global is changed (DESIGN 4): no ``XLA_FLAGS``, no JAX config.
 """
 from __future__ import annotations
@@ -64,17 +68,35 @@ CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_l
                "xla_cpu_copy_insertion_use_region_analysis": True, **NO_CUSTOM_FUSIONS}
 
 
-@functools.lru_cache(maxsize=None)
+def platform() -> str:
+    """The platform ("cpu", "gpu", "tpu") that a computation started now runs on: that of the
+    device ``jax.default_device`` names, if a context or the config sets one, else JAX's
+    default backend. (On a GPU machine ``jax.default_backend()`` stays "gpu" inside
+    ``jax.default_device(cpu)``.)"""
+    d = jax.config.jax_default_device
+    if d is None:
+        return jax.default_backend()
+    return jax.devices(d)[0].platform if isinstance(d, str) else d.platform
+
+
 def options() -> tuple:
-    """The (name, value) pairs of :data:`CPU_OPTIONS` that this jaxlib accepts on the default
-    backend, probed by compiling a one-op program with all of them (and with each alone when
-    that fails); ``()`` off the CPU."""
-    if jax.default_backend() != "cpu":
+    """The (name, value) pairs of :data:`CPU_OPTIONS` that this jaxlib accepts on the
+    :func:`platform` a program is compiled for, probed by compiling a one-op program with all
+    of them (and with each alone when that fails); ``()`` off the CPU."""
+    return _options(platform())
+
+
+@functools.lru_cache(maxsize=None)
+def _options(plat: str) -> tuple:
+    if plat != "cpu":
         return ()
     items = tuple(sorted(CPU_OPTIONS.items()))
     if _accepted(dict(items)):      # one probe when all are known (the usual case)
         return items
     return tuple(item for item in items if _accepted(dict([item])))
+
+
+options.cache_clear = _options.cache_clear      # (tests probe again with other CPU_OPTIONS)
 
 
 def _accepted(opts: dict) -> bool:
@@ -96,14 +118,16 @@ class TopLevelJit:
 
     def __init__(self, fun, **jit_kwargs):
         self.plain = jax.jit(fun, **jit_kwargs)
-        self._fun, self._kwargs, self._tuned = fun, jit_kwargs, None
+        self._fun, self._kwargs, self._tuned = fun, jit_kwargs, {}
         functools.update_wrapper(self, fun)
 
     def _top(self):
-        if self._tuned is None:
-            opts = options()
-            self._tuned = jax.jit(self._fun, compiler_options=dict(opts), **self._kwargs) if opts else self.plain
-        return self._tuned
+        """The jitted function with the options of the platform it runs on (one per platform:
+        CPU options would be an error for another compiler)."""
+        opts = options()
+        if opts not in self._tuned:
+            self._tuned[opts] = jax.jit(self._fun, compiler_options=dict(opts), **self._kwargs) if opts else self.plain
+        return self._tuned[opts]
 
     def __call__(self, *args, **kwargs):
         if not _top_level(args, kwargs):
@@ -118,15 +142,14 @@ class TopLevelJit:
 
     def _cache_size(self) -> int:
         """Compiled programs held, both variants (tests check that a call did not recompile)."""
-        n = self.plain._cache_size()
-        return n + (self._tuned._cache_size() if self._tuned not in (None, self.plain) else 0)
+        return self.plain._cache_size() + sum(f._cache_size() for f in self._tuned.values() if f is not self.plain)
 
 
 def can_fuse() -> bool:
     """True where a top-level program may hold :func:`one_kernel` regions: on the CPU, with a
     jaxlib that accepted the options keeping custom fusions out (:data:`NO_CUSTOM_FUSIONS`).
     Only programs compiled by :func:`jit` at the top level get those options."""
-    return jax.default_backend() == "cpu" and set(NO_CUSTOM_FUSIONS.items()) <= set(options())
+    return platform() == "cpu" and set(NO_CUSTOM_FUSIONS.items()) <= set(options())
 
 
 _KERNEL, _TOP = threading.local(), threading.local()
@@ -190,7 +213,7 @@ def one_kernel(fn, consts, state):
     inside a user's ``jit`` XLA may form a custom fusion in the region, which then fails to
     compile (``UNIMPLEMENTED: Fusion kind not implemented on CPU``).
     """
-    if jax.default_backend() != "cpu":
+    if platform() != "cpu":
         return fn(consts, state)
     leaves, tree = jax.tree.flatten(consts)
     leaves = [jnp.asarray(x) for x in leaves]

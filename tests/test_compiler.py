@@ -30,7 +30,7 @@ def test_top_level_calls_use_the_options_and_traced_calls_the_plain_jit(fresh_op
     f = compiler.jit(_f, static_argnums=(1,))
     x = jnp.linspace(0.0, 1.0, 5)
     np.testing.assert_array_equal(f(x, 2.0), _f(x, 2.0))
-    assert (f._tuned is not f.plain) == bool(compiler.options())
+    assert (f._top() is not f.plain) == bool(compiler.options())
     # inside jit (compiler options there are an error), vmap and jvp: the plain program
     np.testing.assert_allclose(jax.jit(lambda y: f(y, 2.0))(x), _f(x, 2.0), rtol=1e-15)
     np.testing.assert_allclose(jax.vmap(lambda y: f(y, 2.0))(x), _f(x, 2.0), rtol=1e-15)
@@ -92,7 +92,7 @@ def test_an_option_this_jaxlib_rejects_is_left_out(fresh_options):
     assert compiler.options() == ()
     f = compiler.jit(_f, static_argnums=(1,))
     np.testing.assert_array_equal(f(jnp.ones(3), 3.0), _f(jnp.ones(3), 3.0))
-    assert f._tuned is f.plain
+    assert f._top() is f.plain
 
 
 def _loop(consts, state):

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 from jax import lax
 from jax.custom_batching import custom_vmap
 
-from ..compiler import in_kernel
+from ..compiler import in_kernel, platform
 
 
 def gauss_jordan(A: jax.Array, B: jax.Array) -> jax.Array:
@@ -55,7 +55,7 @@ def _one_at_a_time(plain):
             return plain(A, B), False
         A = A if in_batched[0] else jnp.broadcast_to(A, (axis_size,) + A.shape)
         B = B if in_batched[1] else jnp.broadcast_to(B, (axis_size,) + B.shape)
-        if jax.default_backend() == "cpu":
+        if platform() == "cpu":
             return lax.map(lambda ab: plain(*ab), (A, B)), True
         return jax.vmap(plain)(A, B), True
     return rule

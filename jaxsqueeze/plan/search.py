@@ -237,10 +237,10 @@ def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, c
     op = scene.operator() if op is None else op
     qfn = quality_of(scene, quality)
     if batch == "auto":
-        batch = "loop" if jax.default_backend() == "cpu" else "vmap"
+        batch = "loop" if compiler.platform() == "cpu" else "vmap"
     if batch not in ("vmap", "loop", "processes"):
         raise ValueError(f"batch={batch!r}; choose 'auto', 'vmap', 'loop' or 'processes'")
-    chunk = chunk or _default_chunk(batch, len(X), jax.default_backend())
+    chunk = chunk or _default_chunk(batch, len(X), compiler.platform())
     if batch == "processes":
         from ..batch import map_scenes
         part = partial(_evaluate_part, scene, quality, dataclasses.replace(op, field=None))

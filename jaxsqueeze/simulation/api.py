@@ -145,7 +145,7 @@ def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
         if not any(flags):
             out = simulate(*rebuild(xs), cfg)
             return out, jax.tree.map(lambda _: False, out)
-        if jax.default_backend() != "cpu":
+        if compiler.platform() != "cpu":
             full = [x if f else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x)) for x, f in zip(xs, flags)]
             out = jax.vmap(lambda *ys: simulate(*rebuild(ys), cfg))(*full)
             return out, jax.tree.map(lambda _: True, out)

@@ -193,6 +193,28 @@ def test_vmap_over_friction_equals_loop(slanted):
         np.testing.assert_allclose(batched[k], single, rtol=1e-10, atol=1e-12 * np.abs(single).max())
 
 
+def test_a_squeeze_pinned_to_the_cpu_on_a_gpu_machine_runs_as_on_a_cpu(slanted, monkeypatch):
+    """README: on a GPU machine ``with jax.default_device(jax.devices("cpu")[0]): res =
+    jsq.squeeze(scene)`` runs one squeeze on the CPU. ``jax.default_backend()`` stays "gpu"
+    there, and the library's choices followed it: no CPU compile options, and batches of small
+    solves through jaxlib's batched LAPACK, which deadlocks inside a loop on the CPU. They now
+    follow compiler.platform(), the platform of the device. (The GPU backend is simulated.)"""
+    from jaxsqueeze import compiler
+    from jaxsqueeze.mechanics import linalg
+    ref = jsq.squeeze(slanted)
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    A = jnp.eye(3)[None] * jnp.arange(1.0, 5.0)[:, None, None]
+    one_at_a_time = lambda: "scan" in str(jax.make_jaxpr(jax.vmap(linalg.solve))(A, jnp.ones((4, 3))))  # noqa: E731
+    assert compiler.platform() == "gpu" and compiler.options() == () and not one_at_a_time()
+    with jax.default_device(jax.devices("cpu")[0]):
+        assert compiler.platform() == "cpu" and compiler.options() == compiler._options("cpu") != ()
+        assert one_at_a_time()
+        res = jsq.squeeze(slanted)
+    np.testing.assert_array_equal(res.forces, ref.forces)       # the same program as without the context
+    with jax.default_device("cpu"):
+        assert compiler.platform() == "cpu"
+
+
 def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
     """Inside vmap a bad number cannot raise: its lane reports INVALID_INPUT with the index of
     the field (depth), records one unloaded row at depth 0 (not the invalid depth echoed back),
