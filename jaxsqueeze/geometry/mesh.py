@@ -163,7 +163,7 @@ def _few(items, k: int = 8) -> str:
 def _check_arrays(points, triangles):
     """Shapes, finiteness and index range; returns float64 (n, 2) and int64 (t, 3)."""
     pts = real_array(points, "points", "m")
-    tri = np.asarray(triangles) if np.asarray(triangles).dtype.kind in "iu" else real_array(triangles, "triangles")
+    tri = real_array(triangles, "triangles")       # (node indices are exact in float64)
     if pts.size == 0 or tri.size == 0:
         raise ValueError(f"empty mesh: points {pts.shape}, triangles {tri.shape}; "
                          "a mesh needs (n, 2) points and at least one (3,) triangle")
@@ -173,9 +173,8 @@ def _check_arrays(points, triangles):
     if tri.ndim != 2 or tri.shape[1] != 3:
         raise ValueError(f"triangles must have shape (t, 3) (three node indices per triangle); "
                          f"got {tri.shape}")
-    if not np.issubdtype(tri.dtype, np.integer):
-        if not np.all(np.isfinite(tri)) or np.any(tri != np.round(tri)):
-            raise ValueError("triangles must hold integer node indices")
+    if not np.all(np.isfinite(tri)) or np.any(tri != np.round(tri)):
+        raise ValueError("triangles must hold integer node indices")
     tri = tri.astype(np.int64)
     bad = np.flatnonzero(~np.all(np.isfinite(pts), axis=1))
     if bad.size:
