@@ -225,11 +225,11 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     return summ
 
 
-def _default_chunk(batch: str, n: int, backend: str) -> int:
+def _default_chunk(batch: str, n: int, plat: str) -> int:
     """Candidates per chunk when ``evaluate`` is given none: a ``vmap`` on an accelerator
     takes up to :data:`ACCELERATOR_CHUNK` (one program for all of a smaller batch), else
     :data:`CHUNK`."""
-    return min(ACCELERATOR_CHUNK, max(n, 1)) if batch == "vmap" and backend != "cpu" else CHUNK
+    return min(ACCELERATOR_CHUNK, max(n, 1)) if batch == "vmap" and plat != "cpu" else CHUNK
 
 
 def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, cache) -> Summary:

@@ -16,6 +16,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 from matplotlib.tri import Triangulation
 
+from ..numbers import real_array
 from . import cones, views
 from .views import EVENT_LETTERS, FREE, SLIP_POS, STICK
 
@@ -78,7 +79,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     mesh = views.check_object(res, mesh)     # (a scene gives its mesh)
     zoom = _zoom(zoom)
     if displacement is not None:
-        displacement = np.asarray(displacement, float)
+        displacement = real_array(displacement, "displacement", "m")
         if displacement.shape != np.shape(mesh.points) or not np.all(np.isfinite(displacement)):
             raise ValueError(f"displacement must be finite (n, 2) = {np.shape(mesh.points)} nodal displacements [m] of "
                              f"the mesh, got shape {displacement.shape}; see jaxsqueeze.views.row_displacement")
