@@ -144,6 +144,12 @@ def test_views_plots_and_exports_refuse_another_object_of_the_same_node_counts(o
     for u in (np.zeros((3, 2)), np.full(np.shape(scene.mesh.points), np.nan)):
         with pytest.raises(ValueError, match=r"displacement must be finite \(n, 2\)"):
             plots.plot_deformed(res, scene, displacement=u)
+    with pytest.raises(ValueError, match=r"displacement must be real numbers \[m\]; got dtype complex128"):
+        plots.plot_deformed(res, scene, displacement=np.zeros(np.shape(scene.mesh.points)) + 1e-3j)
+    b0 = int(scene.mesh.boundary[0])
+    with pytest.raises(ValueError, match=r"node indices must be integers, got 0.5 \(float64\)"):
+        scene.arc_length(0.5)                                           # it was read as node 0
+    assert float(scene.arc_length(b0)) == float(scene.arc_length(np.int32(b0)))
     with pytest.raises(ValueError, match="rows is empty"):
         plots.plot_force_profile(res, rows=[])
     for count in (0, -3, 1.5, True):
