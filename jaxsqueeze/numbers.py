@@ -17,3 +17,20 @@ def real_array(x, what: str, unit: str = "") -> np.ndarray:
     if a.dtype.kind not in "iuf":
         raise ValueError(f"{what} must be real numbers{where}; got dtype {a.dtype}")
     return a.astype(np.float64)
+
+
+def positive(x, what: str, unit: str = "") -> float:
+    """``x`` as a float when it is one finite real number > 0; else ``ValueError`` naming
+    ``what`` (and its ``unit``). Booleans, text, complex numbers and arrays of more than one
+    value are refused rather than read as a number."""
+    where = f" [{unit}]" if unit else ""
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError):
+        a = np.asarray(None)
+    if a.ndim != 0 or a.dtype.kind not in "iuf":
+        raise ValueError(f"{what} must be one positive, finite number{where}; got {x!r:.80}")
+    v = float(a)
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{what} must be a positive, finite number{where}; got {v!r}")
+    return v

@@ -41,7 +41,7 @@ import warnings
 import numpy as np
 import triangle as tr
 
-from ..numbers import real_array
+from ..numbers import positive, real_array
 from ..tracing import caller_level
 from .mesh import Mesh, too_thin
 
@@ -91,7 +91,7 @@ def rectangle(width, height, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
     The four corners are nodes. ``refine`` takes ``refine_near``, ``refine_edge`` and
     ``refine_radius`` as in :func:`polygon`.
     """
-    w, hh = _positive(width, "width") / 2, _positive(height, "height") / 2
+    w, hh = positive(width, "width", "m") / 2, positive(height, "height", "m") / 2
     cx, cy = _center(center)
     corners = [(cx - w, cy - hh), (cx + w, cy - hh), (cx + w, cy + hh), (cx - w, cy + hh)]
     return polygon(corners, max_edge=max_edge, **refine)
@@ -102,7 +102,7 @@ def disk(radius, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
 
     ``refine`` takes ``refine_near``, ``refine_edge``, ``refine_radius`` (see :func:`polygon`).
     """
-    return ellipse(_positive(radius, "radius"), radius, max_edge, center=center, **refine)
+    return ellipse(positive(radius, "radius", "m"), radius, max_edge, center=center, **refine)
 
 
 def ellipse(a, b, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
@@ -112,7 +112,7 @@ def ellipse(a, b, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
     """
     h = _sizing(max_edge, **refine)
     c = _center(center)
-    a, b = _positive(a, "a"), _positive(b, "b")
+    a, b = positive(a, "a", "m"), positive(b, "b", "m")
     _guard(np.pi * a * b, 2 * np.pi * max(a, b), 2 * max(a, b), h)
     ring = _sample_ellipse(c, a, b, h)
     return _checked(_mesh_rings([ring], [], h), 2 * max(a, b), h)
@@ -124,7 +124,7 @@ def annulus(r_outer, r_inner, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
     Two boundary loops: the outer circle (counterclockwise) and the hole (clockwise).
     ``refine`` as in :func:`polygon`.
     """
-    ro, ri = _positive(r_outer, "r_outer"), _positive(r_inner, "r_inner")
+    ro, ri = positive(r_outer, "r_outer", "m"), positive(r_inner, "r_inner", "m")
     if ri >= ro:
         raise ValueError(f"annulus needs r_inner < r_outer; got r_inner={ri}, r_outer={ro}")
     h = _sizing(max_edge, **refine)
@@ -135,15 +135,6 @@ def annulus(r_outer, r_inner, max_edge, center=(0.0, 0.0), **refine) -> Mesh:
 
 
 # ----------------------------------------------------------------------------- validation
-
-
-def _positive(x, name) -> float:
-    if isinstance(x, (bool, str, bytes, complex)) or np.ndim(x) != 0 or np.iscomplexobj(x):
-        raise ValueError(f"{name} must be one positive, finite length in metres; got {x!r}")
-    x = float(x)
-    if not np.isfinite(x) or x <= 0:
-        raise ValueError(f"{name} must be a positive, finite length in metres; got {x}")
-    return x
 
 
 def _center(center) -> np.ndarray:
@@ -283,14 +274,14 @@ def estimate(shape: str, *args, max_edge=None, center=None, holes=(), **refine) 
     estimated without meshing (for cost guards before any work)."""
     h = _sizing(max_edge, **refine)
     if shape == "rectangle":
-        w, hh = _positive(args[0], "width"), _positive(args[1], "height")
+        w, hh = positive(args[0], "width", "m"), positive(args[1], "height", "m")
         area, per = w * hh, 2 * (w + hh)
     elif shape in ("disk", "ellipse"):
-        a = _positive(args[0], "radius" if shape == "disk" else "a")
-        b = a if shape == "disk" else _positive(args[1], "b")
+        a = positive(args[0], "radius" if shape == "disk" else "a", "m")
+        b = a if shape == "disk" else positive(args[1], "b", "m")
         area, per = np.pi * a * b, 2 * np.pi * max(a, b)
     elif shape == "annulus":
-        ro, ri = _positive(args[0], "r_outer"), _positive(args[1], "r_inner")
+        ro, ri = positive(args[0], "r_outer", "m"), positive(args[1], "r_inner", "m")
         area, per = np.pi * max(ro ** 2 - ri ** 2, 0.0), 2 * np.pi * (ro + ri)
     elif shape == "polygon":
         rings = [np.asarray(args[0], float).reshape(-1, 2)] + [np.asarray(v, float).reshape(-1, 2) for v in holes]
@@ -356,7 +347,7 @@ def _sizing(max_edge, refine_near=None, refine_edge=None, refine_radius=None):
     ``min_edge`` and ``refined``."""
     if max_edge is None:
         raise ValueError("max_edge (target edge length in metres) is required")
-    h_max = _positive(max_edge, "max_edge")
+    h_max = positive(max_edge, "max_edge", "m")
     if refine_near is None:
         if refine_edge is not None or refine_radius is not None:
             raise ValueError("refine_edge/refine_radius need refine_near (the points to refine near)")
@@ -375,7 +366,7 @@ def _sizing(max_edge, refine_near=None, refine_edge=None, refine_radius=None):
     if not ok:
         raise ValueError(f"refine_near must be finite (k, 2) points in metres; got {refine_near!r}")
     near = near.reshape(-1, 2)
-    h_min = h_max / 4 if refine_edge is None else _positive(refine_edge, "refine_edge")
+    h_min = h_max / 4 if refine_edge is None else positive(refine_edge, "refine_edge", "m")
     if h_min > h_max:
         raise ValueError(f"refine_edge ({h_min}) must not exceed max_edge ({h_max})")
     radius = 2 * h_max if refine_radius is None else float(refine_radius)

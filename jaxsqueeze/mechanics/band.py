@@ -83,7 +83,7 @@ from scipy.interpolate import CubicSpline
 from ..geometry.boundary import crossing
 from ..geometry.curves import arclength_params
 from ..geometry.mesh import ByContent
-from ..numbers import real_array
+from ..numbers import positive, real_array
 from ..tracing import as_array, caller_level
 from .operator import Compliance, FieldMap, rigid_modes
 
@@ -164,15 +164,7 @@ def _check_wall(width: float, xy: np.ndarray, kappa: np.ndarray) -> None:
 
 def _length(name: str, v) -> float:
     """A band dimension as a float, or ValueError naming it (finite and > 0 m)."""
-    try:
-        if isinstance(v, (str, bytes)):
-            raise TypeError
-        x = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"band {name} = {v!r}: expected a length in metres > 0") from None
-    if not (np.isfinite(x) and x > 0):
-        raise ValueError(f"band {name} = {v!r}: expected a finite length > 0 m")
-    return x
+    return positive(v, f"band {name}", "m")
 
 
 @dataclass(frozen=True, eq=False)
@@ -340,14 +332,23 @@ class Band(ByContent):
 
     def rotation(self, dofs) -> np.ndarray:
         """(m,) small rotation phi [rad] (counterclockwise) of the band's cross-section at
-        each node: phi = t x d(delta)/ds, from the slope DOFs."""
-        d = np.asarray(dofs, dtype=np.float64).reshape(self.m, 4)[:, 2:]
+        each node: phi = t x d(delta)/ds, from the slope DOFs of ``dofs`` (4m,)."""
+        d = self._nodal(dofs)[:, 2:]
         return self.tangents[:, 0] * d[:, 1] - self.tangents[:, 1] * d[:, 0]
 
     def alpha_beta(self, dofs) -> np.ndarray:
-        """Tangential and outward normal nodal displacement (m, 2) [m]: (alpha_k, beta_k)."""
-        d = np.asarray(dofs, dtype=np.float64).reshape(self.m, 4)[:, :2]
+        """Tangential and outward normal nodal displacement (m, 2) [m]: (alpha_k, beta_k), from
+        ``dofs`` (4m,): (dx [m], dy [m], dx/ds, dy/ds) per node."""
+        d = self._nodal(dofs)[:, :2]
         return np.stack([np.sum(d * self.tangents, 1), np.sum(d * self.normals, 1)], axis=1)
+
+    def _nodal(self, dofs) -> np.ndarray:
+        """(m, 4) per-node DOFs from the band's (4m,) DOF vector, or ValueError."""
+        d = real_array(dofs, "band DOFs")
+        if d.shape != (4 * self.m,):
+            raise ValueError(f"band DOFs must have shape (4m,) = ({4 * self.m},) for this band of m = {self.m} "
+                             f"nodes (dx, dy, dx/ds, dy/ds per node); got {d.shape}")
+        return d.reshape(self.m, 4)
 
     def _dof_scale(self) -> np.ndarray:
         """D (ndof,): 1 on displacements, the mean element length on the slope DOFs."""
@@ -462,8 +463,7 @@ def band_compliance(band: Band, E: float, dtype=None) -> Compliance:
     E h T K^+ T^T, exact on self-equilibrated loads up to a rigid motion;
     ``N = rigid_modes(points)``; the field map is G itself (a band has no other nodes).
     """
-    if not E > 0:
-        raise ValueError(f"Young's modulus E must be > 0 Pa, got {E!r}")
+    E = positive(E, "Young's modulus E", "Pa")
     T = band.to_xy()
     G = (E * band.height) * (T @ band_pinv(band, band_stiffness(band, E)) @ T.T)
     G = 0.5 * (G + G.T)

@@ -230,9 +230,9 @@ def test_a_repeated_closing_point_is_dropped_and_coincident_points_are_named():
     ((10.5,), {}, "integer number of nodes m >= 8, got 10.5"),
     ((True,), {}, "integer number of nodes"),
     ((10 ** 6,), {}, "a band of 1,000,000 nodes needs dense matrices .* beyond the limit of 2,048 nodes"),
-    ((16,), dict(width=float("inf")), "band width = inf: expected a finite length > 0 m"),
-    ((16,), dict(height="5"), "band height = '5': expected a length in metres"),
-    ((16,), dict(height=-1.0), "band height = -1.0"),
+    ((16,), dict(width=float("inf")), r"band width must be a positive, finite number \[m\]; got inf"),
+    ((16,), dict(height="5"), r"band height must be one positive, finite number \[m\]; got '5'"),
+    ((16,), dict(height=-1.0), "band height must be a positive, finite number .*; got -1.0"),
     ((16,), dict(width=0.5), r"band width = 0.5 m is the wall thickness .* only 0.08 m across: the wall would fill"),
 ])
 def test_bands_too_coarse_too_large_or_of_bad_size_are_refused(args, kw, match):
@@ -270,3 +270,22 @@ def test_a_wall_thicker_than_the_tightest_curvature_radius_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         Band.from_function(curves.heart(0.08), 128)          # the default 0.5 mm wall: w / r = 0.23
+
+
+def test_band_compliance_modulus_and_dof_vectors_are_checked():
+    """band_compliance(E="x") failed with "'>' not supported between str and int", E = inf and
+    E = True were accepted; Band.rotation / alpha_beta of a DOF vector of the wrong length failed
+    in numpy's reshape. Each is now a ValueError naming the argument; a right-sized vector still
+    gives the rotation of a rigid turn (phi = 1 rad at every node)."""
+    band = Band.from_function(curves.circle(0.04), 16)
+    for bad in ("x", float("inf"), True, [2e9], 0.0, -1.0):
+        with pytest.raises(ValueError, match=r"Young's modulus E must be (one|a) positive, finite number \[Pa\]"):
+            band_compliance(band, bad)
+    for bad in (np.zeros(5), np.zeros((16, 4)), np.zeros(65)):
+        with pytest.raises(ValueError, match=r"band DOFs must have shape \(4m,\) = \(64,\) .* got \("):
+            band.rotation(bad)
+        with pytest.raises(ValueError, match=r"band DOFs must have shape"):
+            band.alpha_beta(bad)
+    turn = band.rigid_dofs()[:, 2]                                     # unit rotation about the centroid
+    np.testing.assert_allclose(band.rotation(turn), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(band.alpha_beta(turn)[:, 1], 0.0, atol=1e-12)   # a circle turns in place
