@@ -361,7 +361,8 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d):
     position is indeterminate (a drift along flat faces, a disk's spin) E is flat or, with
     material points pinned to the tips, slightly concave, and the stated rule holds it: the
     stationary point of E + ½ ε |ĝ⊥|², ĝ⊥ the rigid drift across the squeeze line and the spin
-    of the boundary displacement since the first touch (its least-squares rigid fit), and
+    (times the boundary's RMS radius) of the boundary displacement since the first touch (its
+    least-squares rigid fit), and
     ε = ``NEUTRAL_REG`` × the mean contact stiffness: a spring anchored at the touch, stiff
     against the drift mode's negative stiffness (``docs/numerics.md`` §5.1). ĝ⊥ is continuous
     at a contact change (a node joins unloaded), so a joining node feels no jump from it.
@@ -392,7 +393,11 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d):
         lift = jnp.concatenate([linalg.solve(N.T @ N, N.T @ sl.Gc), jnp.eye(3, dtype=N.dtype)], axis=1)
         fit = (lift @ sl.Minv)[:, : 2 * S]
         e = model.axis
-        K = jnp.stack([-e[1] * fit[0] + e[0] * fit[1], fit[2]]).reshape(2, S, 2)
+        # the spin weighed by the boundary's RMS radius: the boundary's RMS displacement by it, a
+        # length as the drift is (the rule must not change with the scaled unit of length, the
+        # bounding box, which changes as the object turns in the plane)
+        rho = jnp.sqrt(jnp.mean(jnp.sum(model.op.points * model.op.points, axis=-1)))
+        K = jnp.stack([-e[1] * fit[0] + e[0] * fit[1], rho * fit[2]]).reshape(2, S, 2)
         diag = jnp.diagonal(sl.Minv)[: 2 * S].reshape(S, 2).sum(1)
         eps = NEUTRAL_REG * jnp.sum(jnp.where(v.active, diag, 0.0)) / jnp.maximum(2 * jnp.sum(v.active), 1)
 

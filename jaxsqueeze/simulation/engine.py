@@ -266,6 +266,14 @@ def reconcile(model: Model, st: State) -> State:
     return _with(st, slots=slots, fault=fault, stats=stats, status=status)
 
 
+def largest(F):
+    """() the largest magnitude among forces F (..., 2): the scale of the shares above, the
+    same however the object is turned in the plane (a largest *component* is not). A threshold,
+    so no tangent (nor sqrt's infinite one at zero)."""
+    F = lax.stop_gradient(F)
+    return jnp.sqrt(jnp.max(jnp.sum(F * F, axis=-1)))
+
+
 def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
     """Adopt a solved configuration at depth d as the next row (slip angles move, anchors stay),
     and record it (:func:`finish`)."""
@@ -282,7 +290,7 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
     if model.cfg.friction_model == "frictionless":
         on = st.nodes.mode > FREE
         floor = 100 * jnp.finfo(sol.F.dtype).eps           # scaled forces at the touch are round-off
-        big = DRIFT_SHARE * jnp.maximum(jnp.max(jnp.abs(sol.F)), floor)
+        big = DRIFT_SHARE * jnp.maximum(largest(sol.F), floor)
         # a contact made at this event's depth carries the event location's error there (a
         # broad tip's neighbours joined at 6.8e-5 m pulling 1 % of the grip node's small force);
         # the hypothesis judged it by its rate, and the next row by its force
@@ -556,7 +564,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # located to event_tol); while it is being pressed harder (its force's rate positive) it
     # is joining, not peeling: letting it go would only make the same A event again at d*
     joining = st.added & (dsol.fn > 0)
-    peeled = on & ~joining & (sol.fn < -share * jnp.max(jnp.abs(sol.F))) & (st.checks < SETTLE_ITERS) \
+    peeled = on & ~joining & (sol.fn < -share * largest(sol.F)) & (st.checks < SETTLE_ITERS) \
         & jnp.all(held > 0)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled

@@ -128,9 +128,33 @@ def test_a_coarse_asymmetric_mesh_stalls_early_and_says_so():
                                 friction=0.0, depth=0.015, friction_model="frictionless"))
     assert res.status == jsq.Status.STALLED and 0 < res.final_depth < 0.008
     fn, ft, on = radial_split(res)
-    big = np.abs(np.asarray(res.forces)).max(axis=(1, 2))
+    big = np.linalg.norm(np.asarray(res.forces), axis=-1).max(axis=1)      # the row's largest contact force
     assert np.all(np.abs(ft[:-1][on[:-1]]) <= np.broadcast_to(DRIFT_SHARE * big[:-1, None], ft[:-1].shape)[on[:-1]])
     assert np.any(np.abs(ft[-1][on[-1]]) > DRIFT_SHARE * big[-1])
+
+
+@pytest.mark.parametrize("degrees", [37.0, 45.0])
+def test_the_drift_rule_does_not_depend_on_how_the_object_is_turned(degrees):
+    """Turned in the plane (same triangles and grip nodes), a frictionless squeeze is the same
+    squeeze turned. It was not, twice over: the guard compared the tangential force with 1 % of
+    the largest force *component* (a disk gripped across stalled at 14.5 mm upright, 11.6 mm
+    turned by 37°), and the rule's spring weighed the spin against the drift in the scaled unit
+    of length, the bounding box, which grows as the object turns (forces 3.5e-7 apart by 7 mm)."""
+    mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01)
+    grip = (nearest(mesh, (0, -0.05)), nearest(mesh, (0, 0.05)))
+    a = np.deg2rad(degrees)
+    A = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    upright, turned = (jsq.squeeze(jsq.Scene(mesh=m, material=MAT, fingers=jsq.Fingers(radius=0.01), grip=grip,
+                                             friction=0.0, depth=0.015, friction_model="frictionless"))
+                       for m in (mesh, jsq.Mesh.from_arrays(mesh.points @ A.T, mesh.triangles)))
+    assert upright.status == turned.status == jsq.Status.STALLED
+    np.testing.assert_allclose(turned.depth, upright.depth, rtol=1e-12)
+    assert turned.events.rows() == upright.events.rows()
+    up, tu = np.zeros((len(upright.depth), mesh.n, 3)), np.zeros((len(turned.depth), mesh.n, 3))
+    up[:, upright.nodes] = np.dstack([upright.forces, upright.modes])         # by mesh node: the boundary
+    tu[:, turned.nodes] = np.dstack([np.asarray(turned.forces) @ A, turned.modes])   # order changes as it turns
+    assert np.array_equal(tu[..., 2], up[..., 2])
+    np.testing.assert_allclose(tu, up, rtol=0, atol=1e-12 * np.abs(up).max())
 
 
 @pytest.mark.parametrize("step,depth", [(4e-4, 0.02), (1e-4, 0.015), (2.5e-4, 0.015)])
