@@ -14,6 +14,12 @@ from ..tracing import caller_level
 from .boundary import crossing, neighbours
 
 
+class RenumberedWarning(UserWarning):
+    """A mesh was built from points some of which no triangle uses: they were dropped and node
+    numbers after them shifted (``Mesh.source`` maps back). Scene files, which check their own
+    node numbers, leave it out."""
+
+
 class ByContent:
     """Equality and hash by the content of a frozen dataclass's fields (arrays by dtype, shape
     and bytes): an object rebuilt from the same data is the same static part of a pytree, so
@@ -109,6 +115,14 @@ class Mesh(ByContent):
         _check_resolution(pts)
         used = np.unique(tri)  # original index of each kept node
         source = used.astype(np.int64) if len(used) < len(pts) else None
+        if source is not None and source[-1] >= len(used):        # some kept node changes its number
+            dropped = np.setdiff1d(np.arange(len(pts)), used)
+            warnings.warn(RenumberedWarning(
+                f"points has {len(dropped)} node(s) used by no triangle ({', '.join(map(str, dropped[:8]))}"
+                f"{' ...' if len(dropped) > 8 else ''}): they are dropped "
+                f"and the nodes after them renumbered (mesh.source[k] is your index of node k), so node "
+                "numbers of yours (a grip, deform's nodes) name other nodes here; pick nodes on this mesh "
+                "(jsq.scene.nearest_boundary_node) or remove the unused points"), stacklevel=caller_level())
         tri = np.searchsorted(used, tri)
         pts = pts[used]
         tri = _orient(pts, tri, used)

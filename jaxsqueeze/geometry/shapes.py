@@ -43,7 +43,7 @@ import triangle as tr
 
 from ..numbers import positive, real_array
 from ..tracing import caller_level
-from .mesh import Mesh, too_thin
+from .mesh import Mesh, RenumberedWarning, too_thin
 
 AREA_FACTOR = 1.5
 GRADING = 0.3
@@ -458,7 +458,9 @@ def _mesh_rings(rings, hole_points, h) -> Mesh:
     pts = out["vertices"] * scale + shift
     pts[: len(verts)] = verts
     _check_quality(pts, out["triangles"], rings, h)
-    return Mesh.from_arrays(pts, out["triangles"])
+    with warnings.catch_warnings():     # a vertex the mesher left out: no node number of the user's
+        warnings.simplefilter("ignore", RenumberedWarning)
+        return Mesh.from_arrays(pts, out["triangles"])
 
 
 #: the smallest angle [degrees] :func:`_mesh_rings` accepts (Triangle keeps 30 degrees where the

@@ -60,6 +60,9 @@ def plan_settings(table: dict) -> PlanSettings:
             out[key] = value
         else:
             errors.append(f"plan.{key}: expected {want}, got {value!r}")
+    if not out.get("push", 0.0) > 0:       # without a push there is no adversary to place or turn
+        errors += [f"plan.{key}: sets the adversary's push, which needs plan.push > 0 [m]; got no push"
+                   for key in ("push_at", "push_angle") if key in out]
     if errors:
         raise ValueError("\n".join(errors))
     return PlanSettings(**out)
@@ -94,7 +97,10 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
         except ValueError as e:
             raise ValueError(f"plan.push: {e}") from None
     name = settings.quality or ("adversary_work" if settings.push > 0 else "squeeze_work")
-    quality_of(scene, name)                     # a bad name, or adversary_work without a push, before any work
+    try:
+        quality_of(scene, name)                 # a bad name, or adversary_work without a push, before any work
+    except ValueError as e:
+        raise ValueError(f"plan.quality: {e}") from None
     try:
         opt = getattr(optax, settings.optimizer)(settings.learning_rate)
         if not (hasattr(opt, "init") and hasattr(opt, "update")):

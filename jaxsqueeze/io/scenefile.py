@@ -82,6 +82,7 @@ optional is required; unknown keys, at any level, are errors)::
     push_at = 0.1                  # arc length of the pushed point [m] (default: a quarter of
                                    #   the perimeter past finger 0 of the [grip], for every grasp)
     push_angle = 0.0               # pusher direction from the inward normal [rad]
+                                   #   (push_at and push_angle need push > 0)
 
 Every problem raises :class:`SceneFileError` whose ``key`` names the offending entry
 (``material.nu``, ``grip.points``, ...), so the message reads ``material.nu: ...``.
@@ -170,7 +171,7 @@ def _describe(v) -> str:
     if isinstance(v, dict):
         return "a table"
     if isinstance(v, list):
-        return "an array"
+        return f"an array of {len(v)}" + ("" if all(isinstance(x, (int, float)) for x in v) else " (nested)")
     return repr(v)
 
 
@@ -675,7 +676,7 @@ def _band(obj, height, overrides=(None, None)):
 def _object(obj, base, grip_points, overrides=(None, None)):
     """(mesh, warnings) of the object table (a built-in shape or a mesh file)."""
     from ..geometry import shapes
-    from ..geometry.mesh import read_mesh
+    from ..geometry.mesh import RenumberedWarning, read_mesh
 
     obj = _table("object", obj)
     has_shape, has_file = "shape" in obj, "mesh_file" in obj
@@ -698,7 +699,10 @@ def _object(obj, base, grip_points, overrides=(None, None)):
             with warnings_module.catch_warnings(record=True) as caught:   # scene-file warnings are the spec's
                 warnings_module.simplefilter("always")
                 mesh = read_mesh(path)
-            return mesh, [f"object.mesh_file: {w.message}" for w in caught]
+            # the library's own warnings (not a reader's numpy ones); the file's node numbers are
+            # checked below where grip.nodes uses them
+            return mesh, [f"object.mesh_file: {w.message}" for w in caught
+                          if issubclass(w.category, UserWarning) and not issubclass(w.category, RenumberedWarning)]
         except ValueError as e:
             raise SceneFileError("object.mesh_file", str(e)) from None
         except Exception as e:  # meshio's own read errors (unknown format, corrupt file)
@@ -756,7 +760,10 @@ def _shape_args(obj, grip_points, overrides=(None, None)):
     else:
         args = [_number(f"object.{k}", obj[k], positive=True) for k in req]
         if "center" in obj:
-            kw["center"] = _points("object.center", [obj["center"]], count=1)[0]
+            c = obj["center"]
+            if not (isinstance(c, list) and len(c) == 2):
+                raise SceneFileError("object.center", f"expected one point [x, y], got {_describe(c)}")
+            kw["center"] = _points("object.center", [c], count=1)[0]
     names = {r"outline edge \d+ [^;]*meets outline edge": "object.vertices",    # (its advice names holes too)
              r"refine_edge": "object.refine_edge", r"refine_radius": "object.refine_radius",
              r"refine_near": "grip.points", r"max_edge": "object.max_edge", r"center": "object.center",

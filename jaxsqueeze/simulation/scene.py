@@ -17,6 +17,7 @@ from .laws import CONTACT_MODELS, FRICTION_MODELS
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
 from ..mechanics.operator import Compliance
+from ..numbers import real_array
 
 
 
@@ -467,8 +468,11 @@ def snap(obj, xy) -> Snap:
     """The boundary node of a mesh or band nearest to ``xy`` (2,) in the caller's frame [m]
     (``points + offset``; both :class:`Mesh` and :class:`~jaxsqueeze.band.Band` keep the node
     centroid at the origin and the caller's frame in ``offset``), with what a caller should
-    say about it (:class:`Snap`). Among equally near nodes the first in boundary order wins."""
-    xy = np.asarray(xy, float)
+    say about it (:class:`Snap`). Among equally near nodes the first in boundary order wins.
+    Raises ``ValueError`` unless ``xy`` is one finite (x, y) pair."""
+    xy = real_array(xy, "the point xy", "m")
+    if xy.shape != (2,) or not np.all(np.isfinite(xy)):
+        raise ValueError(f"the point xy must be one finite (x, y) pair in metres, e.g. (0.005, 0.05); got {xy.tolist()}")
     if isinstance(obj, Mesh):
         pts, nodes, loops = obj.points[obj.boundary] + obj.offset, np.asarray(obj.boundary), obj.loops
     else:
@@ -486,8 +490,8 @@ def nearest_boundary_node(obj, xy) -> int:
     point off the outline, as the scene files refuse: e.g. millimetres among metres), and
     otherwise when two nodes are equally near (a point midway between nodes: which one is
     taken decides the grip's slant)."""
-    xy = np.asarray(xy, float)
     s = snap(obj, xy)
+    xy = np.asarray(xy, float)
     if s.off_outline:
         warnings.warn(f"{xy.tolist()} is {s.distance:.3g} m from the nearest boundary node {s.node} at "
                       f"{s.at}, more than twice the boundary edges there ({s.edge:.3g} m); it is "

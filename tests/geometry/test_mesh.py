@@ -69,7 +69,8 @@ def test_square_basics():
 
 def test_clockwise_is_flipped_and_unused_nodes_dropped():
     pts = np.vstack([[9.0, 9.0], SQUARE, [7.0, -7.0]])           # nodes 0 and 5 unused
-    m = Mesh.from_arrays(pts, SQUARE_TRI[:, ::-1] + 1)
+    with pytest.warns(UserWarning, match="used by no triangle"):
+        m = Mesh.from_arrays(pts, SQUARE_TRI[:, ::-1] + 1)
     assert m.n == 4 and np.all(areas(m) > 0)
     np.testing.assert_allclose(m.points + m.offset, SQUARE)      # order of kept nodes preserved
     np.testing.assert_allclose(m.offset, [0.5, 0.5])
@@ -133,7 +134,8 @@ def test_a_mesh_that_overlaps_itself_with_every_triangle_counterclockwise():
     tri = np.array([t for k in range(n - 1) for t in ([k, k + 1, n + k + 1], [k, n + k + 1, n + k])])
     with pytest.raises(ValueError, match=r"boundary crosses itself: edge \[\d+, \d+\] crosses edge"):
         Mesh.from_arrays(pts, tri)
-    Mesh.from_arrays(pts, tri[: 2 * (n // 2)])                 # less than a turn: a valid mesh
+    with pytest.warns(UserWarning, match="used by no triangle"):     # the other points are unused
+        Mesh.from_arrays(pts, tri[: 2 * (n // 2)])             # less than a turn: a valid mesh
 
 
 def test_boundary_crossing_counts_proper_crossings_only():
@@ -522,3 +524,20 @@ def test_refine_near_of_the_wrong_shape_is_named():
     for bad in ([0.0, 0.0, 0.0], "x", [[0.0, float("nan")]]):
         with pytest.raises(ValueError, match="refine_near must be finite \\(k, 2\\) points"):
             shapes.rectangle(0.1, 0.1, max_edge=0.02, refine_near=bad)
+
+
+def test_dropping_an_unused_point_that_shifts_node_numbers_warns():
+    """from_arrays drops points no triangle uses and renumbers the rest: a grip given in the
+    caller's numbering then named other nodes without a word (scene files refuse grip.nodes
+    there; Python did not). It warns, naming the dropped points, when a kept node's number
+    changes; unused points only at the end change no number and say nothing."""
+    import warnings
+    from jaxsqueeze.geometry.mesh import RenumberedWarning
+    pts = np.vstack([[9.0, 9.0], SQUARE, [7.0, -7.0]])           # nodes 0 and 5 unused
+    with pytest.warns(RenumberedWarning, match=r"points has 2 node\(s\) used by no triangle \(0, 5\): they are "
+                                               r"dropped .*\(mesh.source\[k\] is your index of node k\)") as said:
+        m = Mesh.from_arrays(pts, SQUARE_TRI + 1)
+    assert said[0].filename == __file__ and m.source.tolist() == [1, 2, 3, 4]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert Mesh.from_arrays(pts[1:], SQUARE_TRI).source.tolist() == [0, 1, 2, 3]

@@ -264,7 +264,8 @@ def test_grip_nodes_of_a_mesh_file_with_unused_nodes_are_refused(tmp_path):
     mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02)
     pts = np.concatenate([[[0.0, 0.0]], mesh.points + mesh.offset])
     meshio.write(tmp_path / "first.vtu", meshio.Mesh(np.c_[pts, np.zeros(len(pts))], [("triangle", mesh.triangles + 1)]))
-    read = jsq.read_mesh(tmp_path / "first.vtu")
+    with pytest.warns(UserWarning, match=r"used by no triangle \(0\)"):       # Python names the shift
+        read = jsq.read_mesh(tmp_path / "first.vtu")
     np.testing.assert_array_equal(read.source, np.arange(1, mesh.n + 1))
     np.testing.assert_allclose(read.points + read.offset, pts[read.source], atol=1e-15)
     a, b = (int(jsq.scene.nearest_boundary_node(mesh, p)) for p in ((0.0, -0.05), (0.0, 0.05)))
@@ -274,7 +275,15 @@ def test_grip_nodes_of_a_mesh_file_with_unused_nodes_are_refused(tmp_path):
     with pytest.raises(scenefile.SceneFileError, match="used by no triangle .file nodes 0.*give grip.points"):
         scenefile.load(tmp_path / "nodes.toml")
     (tmp_path / "points.toml").write_text('[object]\nmesh_file = "first.vtu"\n\n' + body)
-    assert scenefile.load(tmp_path / "points.toml").scene.grip == (a, b)
+    loaded = scenefile.load(tmp_path / "points.toml")
+    assert loaded.scene.grip == (a, b) and not any("no triangle" in w for w in loaded.warnings)   # no numbers to shift
+    # a reader's own numpy warning (meshio's STL format sniffing: "overflow encountered in scalar
+    # multiply") was printed as the scene's "warning: object.mesh_file: ..."
+    meshio.write(tmp_path / "tris.stl", meshio.Mesh(np.c_[mesh.points + mesh.offset, np.zeros(mesh.n)],
+                                                    [("triangle", mesh.triangles)]), binary=True)
+    (tmp_path / "stl.toml").write_text('[object]\nmesh_file = "tris.stl"\n\n' + body)
+    loaded = scenefile.load(tmp_path / "stl.toml")
+    assert loaded.scene.mesh.n == mesh.n and all(w.startswith("grip.points: ") for w in loaded.warnings), loaded.warnings
     last = np.roll(pts, -1, axis=0)                        # the unused node at the end
     meshio.write(tmp_path / "last.vtu", meshio.Mesh(np.c_[last, np.zeros(len(pts))], [("triangle", mesh.triangles)]))
     assert jsq.read_mesh(tmp_path / "last.vtu").source is not None
@@ -352,6 +361,18 @@ def test_bad_scene_file(case, tmp_path, capsys):
     assert rc == 2
     assert err and any(line.startswith(f"error: {key}: ") for line in err), err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("center, said", [("0.0", "got 0.0"), ("[[0.0, 0.0]]", "got an array of 1 (nested)"),
+                                          ("[0.0, 0.0, 0.0]", "got an array of 3")])
+def test_a_centre_that_is_not_one_point_says_the_form_it_needs(center, said, tmp_path, capsys):
+    """object.center = 0.0 said "expected 1 points [[x, y], ...], got an array" (a number was
+    given, and the form it suggested is itself refused)."""
+    path = tmp_path / "bad.toml"
+    path.write_text(SCENE.replace("max_edge = 0.02", f"max_edge = 0.02\ncenter = {center}"))
+    assert cli.main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: object.center: expected one point [x, y], {said}"), err
 
 
 def test_bad_size_option(tmp_path, capsys):

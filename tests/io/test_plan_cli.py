@@ -124,3 +124,19 @@ def test_plan_errors_of_a_hole_grip_and_a_band_push_name_their_key(tmp_path, cap
     err = capsys.readouterr().err
     assert err.startswith("error: plan.push: an Adversary needs contact='segment'"), err
     assert not (tmp_path / "o").exists()
+
+
+def test_plan_push_settings_without_a_push_and_a_quality_that_needs_one_name_their_keys(tmp_path, capsys):
+    """push_at and push_angle without push were ignored (exit 0, a plan with no adversary);
+    quality = "adversary_work" without push said the quality's error without its key."""
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE.replace("push = 0.002", "push_at = 0.1\npush_angle = 0.3"))
+    assert cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "error: plan.push_at: sets the adversary's push, which needs plan.push > 0 [m]" in err, err
+    assert "plan.push_angle: sets the adversary's push" in err, err
+    path.write_text(SCENE.replace("push = 0.002", 'quality = "adversary_work"'))
+    assert cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: plan.quality: ") and "Adversary" in err, err
+    assert not (tmp_path / "o").exists()

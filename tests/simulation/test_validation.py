@@ -214,6 +214,14 @@ def test_nearest_boundary_node_warns_of_a_point_off_the_outline(square, xy):
     assert len(said) == 1 and said[0].filename == __file__
 
 
+@pytest.mark.parametrize("xy", [(np.nan, 0.0), (np.inf, 0.0), 0.0, (0.0, -0.05, 0.0), "0,0", (1j, 0.0)])
+def test_nearest_boundary_node_refuses_a_point_that_is_not_one_finite_pair(square, xy):
+    """A NaN point returned some node without a word, a scalar was read as (0, 0), a 3-D point
+    and a string failed in numpy's words."""
+    with pytest.raises(ValueError, match=r"the point xy must be (one finite \(x, y\) pair in metres|real numbers)"):
+        jsq.scene.nearest_boundary_node(square, xy)
+
+
 def test_a_depth_as_large_as_the_object_is_refused_also_across_a_diagonal(square):
     """A grip across the square's diagonal is 0.14 m apart, so a 0.105 m squeeze passes the
     grip-distance rule; it is deeper than the object is across (0.1 m) and was SUCCESS with
