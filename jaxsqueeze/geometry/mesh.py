@@ -118,8 +118,7 @@ class Mesh(ByContent):
         if source is not None and source[-1] >= len(used):        # some kept node changes its number
             dropped = np.setdiff1d(np.arange(len(pts)), used)
             warnings.warn(RenumberedWarning(
-                f"points has {len(dropped)} node(s) used by no triangle ({', '.join(map(str, dropped[:8]))}"
-                f"{' ...' if len(dropped) > 8 else ''}): they are dropped "
+                f"points has {len(dropped)} node(s) used by no triangle ({_few(dropped)}): they are dropped "
                 f"and the nodes after them renumbered (mesh.source[k] is your index of node k), so node "
                 "numbers of yours (a grip, deform's nodes) name other nodes here; pick nodes on this mesh "
                 "(jsq.scene.nearest_boundary_node) or remove the unused points"), stacklevel=caller_level())
