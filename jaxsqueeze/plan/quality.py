@@ -10,7 +10,8 @@ batched result (of ``jax.vmap(squeeze)``) it returns one value per member (:func
   2014's "stable squeeze" maximizes it for the same amount of squeezing) [J].
 * :func:`grip_force` — |F_0| at the last squeeze row [N].
 * :func:`slip_margin` — how far the grasp is from total slip at the last squeeze row: each
-  contact node's cone margin sin(φ − ψ) (ψ the angle of its force from the contact normal;
+  contact node's cone margin sin(φ − ψ) (ψ the angle of its force from the cone axis: the
+  fingertip normal, or for point contacts the deformed surface normal, given the scene;
   1 on the axis, 0 on the cone edge, < 0 outside), then for each finger a smooth maximum over
   its contacts (a finger holds while any of its contacts sticks) and a smooth minimum over
   the two fingers (the grasp holds while both do): −τ log Σ_f exp(−M_f/τ) with
@@ -33,6 +34,8 @@ import functools
 import jax
 import jax.numpy as jnp
 
+from ..geometry import boundary
+from ..geometry.mesh import Mesh
 from ..simulation.laws import FREE
 from ..simulation.result import SqueezeResult, norm
 
@@ -85,28 +88,47 @@ def _softmax(x, mask, tau, mean: bool = False):
     return lse - tau * jnp.log(jnp.maximum(jnp.sum(mask), 1)) if mean else lse
 
 
-def slip_margin(res: SqueezeResult, friction, tau: float = 0.01):
+def slip_margin(res: SqueezeResult, friction, tau: float = 0.01, scene=None):
     """() smooth slip margin of the grasp at its last squeeze row (see module docstring); (B,)
     for a batched result.
 
     ``friction``: the Coulomb μ of the squeeze (``scene.friction``); for a batched result one
     shared μ or (B,), one per member. −1 when a finger has no contact.
+    ``scene``: the squeezed scene; needed for point contacts (``contact="point"``, e.g. bands),
+    whose cone axis is the object's deformed surface normal, as in the squeeze (without it the
+    margin is taken about the fingertip normal, which is the cone axis of segment contacts only).
     """
+    surface = _surface(scene)
     batch = jnp.shape(res.depth)[:-1]
     if jnp.ndim(friction) == 0:
-        return per_result(_slip_margin)(res, friction, tau)
+        return per_result(_slip_margin)(res, friction, tau, surface)
     if len(batch) == 1 and jnp.shape(friction) == batch:
-        return jax.vmap(_slip_margin, in_axes=(0, 0, None))(res, friction, tau)
+        return jax.vmap(_slip_margin, in_axes=(0, 0, None, None))(res, friction, tau, surface)
     raise ValueError(f"friction of shape {jnp.shape(friction)}: expected one μ" +
                      (f", or one per member of the batched result (shape {batch})" if batch else " for one result"))
 
 
-def _slip_margin(res: SqueezeResult, friction, tau):
+def _surface(scene):
+    """(points (m, 2) [m], loops) of a point-contact scene's boundary nodes in the result's
+    frame and order; None for segment contacts (or no scene)."""
+    if scene is None or getattr(scene, "contact", "segment") != "point":
+        return None
+    obj = scene.mesh
+    if isinstance(obj, Mesh):
+        return obj.points[obj.boundary], obj.loops
+    return obj.points, (obj.m,)
+
+
+def _slip_margin(res: SqueezeResult, friction, tau, surface=None):
     r = _squeeze_row(res)
     F = jnp.asarray(res.forces)[r]
     mode, fg = jnp.asarray(res.modes)[r], jnp.asarray(res.finger)[r]
-    ang = jnp.asarray(res.theta)[r] + jnp.take_along_axis(jnp.asarray(res.alpha)[r], fg.astype(jnp.int32), 0)
-    axis = jnp.stack([jnp.cos(ang), jnp.sin(ang)], -1)
+    if surface is None:      # segment contacts: the fingertip normal at the contact (from its centre)
+        ang = jnp.asarray(res.theta)[r] + jnp.take_along_axis(jnp.asarray(res.alpha)[r], fg.astype(jnp.int32), 0)
+        axis = jnp.stack([jnp.cos(ang), jnp.sin(ang)], -1)
+    else:                    # point contacts: the inward normal of the deformed surface
+        x0, loops = surface
+        axis = -boundary.normals(jnp.asarray(x0, F.dtype) + jnp.asarray(res.boundary_displacement)[r], loops)
     fn = jnp.sum(F * axis, -1)
     ft = axis[:, 0] * F[:, 1] - axis[:, 1] * F[:, 0]
     size = norm(jnp.stack([fn, ft], -1))

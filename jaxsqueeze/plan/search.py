@@ -50,7 +50,7 @@ def quality_of(scene: Scene, quality) -> Callable:
         return quality
     if quality == "slip_margin":
         mu = scene.friction
-        return lambda res: slip_margin(res, mu)
+        return lambda res: slip_margin(res, mu, scene=scene)
     if quality in QUALITIES:
         if quality == "adversary_work" and scene.adversary is None:
             raise ValueError("quality 'adversary_work' needs an Adversary on the scene "
