@@ -128,9 +128,13 @@ def grip_positions(res) -> np.ndarray:
     row; the initial touch in a full history): a contact node lies on its fingertip circle, so
     its position before the squeeze is that point minus the node's recorded displacement. This
     holds for ``history=False`` results too, whose first row is the end of the squeeze. NaN
-    for a finger whose grip node touches it in no row.
+    for a finger whose grip node touches it in no row, and for both when a placed finger could
+    not touch the object at all (``INFEASIBLE_GRIP`` with margin −π: its row 0 records where the
+    fingertips were placed, not a touch).
     """
     res = trimmed(res)
+    if float(np.asarray(res.margin)) <= -np.pi * (1 - 1e-9):
+        return np.full((2, 2), np.nan)
     modes, finger = np.asarray(res.modes), np.asarray(res.finger)
     theta, C = np.asarray(res.theta, float), np.asarray(res.centres, float)
     alpha, U = np.asarray(res.alpha, float), np.asarray(res.boundary_displacement, float)
@@ -446,6 +450,9 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     tf = np.asarray(res.finger_forces)[-1]
     events = event_table(res)
     D0 = grip_distance(res)
+    if scene is not None and not np.isfinite(D0):       # no touch to read it from: the object's nodes
+        P = np.asarray(scene.mesh.points, float)
+        D0 = float(np.linalg.norm(np.subtract(*P[np.asarray(res.grip)])))
     out = dict(
         status=st.name, success=bool(st == Status.SUCCESS), advice=st.advice,
         final_depth=float(res.final_depth), grip_distance=D0,

@@ -1,5 +1,7 @@
 """Views rebuild rows from what the engine recorded (issue 9: the rigid part g of every row is in
 the result, so no view refits it)."""
+import os
+
 import numpy as np
 import pytest
 
@@ -99,6 +101,30 @@ def test_views_read_the_grip_and_fingers_from_the_result(offset):
     assert s["grip_nodes"] == [int(g) for g in scene.grip]
     assert set(s["total_force"]) == set(s["contact_regions"]) == {"finger0", "finger1"}
     np.testing.assert_allclose(s["total_force"]["finger1"], np.asarray(res.total_force)[-1, 1], rtol=1e-12)
+
+
+def test_a_placed_finger_that_cannot_touch_is_summarised_plotted_and_exported(offset, tmp_path):
+    """Placed 10 mm apart along one edge, a finger cannot touch (INFEASIBLE_GRIP, margin −π);
+    row 0 records where the tips were placed, not a touch. The grip positions read from it put
+    a grip node 31 mm from its place, so save_all, summary(res, scene) and the exports refused
+    the result with its own scene, and summary(res) said a grip distance of 29 mm (the nodes
+    are 90 mm apart). No position is read from such a result now (NaN; the summary with its
+    scene takes the nodes' distance)."""
+    from jaxsqueeze.post import export, plots
+    scene, op, _ = offset
+    placed = scene.replace(grip=None, placement=jsq.Placement(s=(0.0, 0.01)))
+    res = jsq.squeeze(placed, op)
+    assert res.status == jsq.Status.INFEASIBLE_GRIP and float(res.margin) == pytest.approx(-np.pi)
+    assert np.all(np.isnan(views.grip_positions(res))) and views.summary(res)["grip_distance"] is None
+    P = np.asarray(scene.mesh.points)
+    s = views.summary(res, placed)
+    assert s["status"] == "INFEASIBLE_GRIP"
+    assert s["grip_distance"] == pytest.approx(float(np.linalg.norm(np.subtract(*P[np.asarray(res.grip)]))), rel=1e-12)
+    written = plots.save_all(res, placed, tmp_path / "plots")
+    assert len(written) == 4 and all(os.path.getsize(p) > 0 for p in written.values())
+    export.write_final_vtu(tmp_path / "final.vtu", res, placed)
+    export.write_paraview(tmp_path, res, placed, op)
+    assert os.path.getsize(tmp_path / "final.vtu") > 0 and os.path.getsize(tmp_path / "squeeze.h5") > 0
 
 
 def test_views_plots_and_exports_refuse_another_object_of_the_same_node_counts(offset, tmp_path):
