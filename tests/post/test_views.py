@@ -41,7 +41,8 @@ def test_exports_and_summary_refuse_or_survive_what_a_hostile_caller_passes(tmp_
     inside os), a VTU name meshio cannot read the format of, an XDMF name with a folder in it,
     and a mesh or scene of another object (it failed in numpy broadcasting): errors that say
     what was wrong. A result whose first row has no finite contact angle (a squeeze refused at
-    its first solve) has no grip distance; its summary is still valid JSON (null)."""
+    its first solve) has no grip distance of its own (null in valid JSON); given the scene, the
+    summary takes the grip nodes' distance on the object."""
     import dataclasses
     import json
 
@@ -77,8 +78,11 @@ def test_exports_and_summary_refuse_or_survive_what_a_hostile_caller_passes(tmp_
     assert export.write_final_vtu(tmp_path / "s.vtu", res, scene).endswith("s.vtu")      # the scene's mesh
     assert export.write_paraview(tmp_path / "pv", res, scene).endswith("squeeze.xdmf")
     blind = dataclasses.replace(res, theta=np.full_like(res.theta, np.nan))
-    s = views.summary(blind, scene)
+    s = views.summary(blind)
     assert s["grip_distance"] is None and s["relative_depth"] is None
+    json.dumps(s, allow_nan=False)
+    s = views.summary(blind, scene)             # with the scene: the grip nodes' distance on the object
+    assert s["grip_distance"] == pytest.approx(0.1, rel=1e-12) and s["relative_depth"] is not None
     json.dumps(s, allow_nan=False)
 
 
