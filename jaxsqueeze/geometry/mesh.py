@@ -200,7 +200,7 @@ def _check_arrays(points, triangles):
     return pts, tri
 
 
-def _signed_areas(pts, tri):
+def signed_areas(pts, tri):
     """Signed areas of triangles (t,) [m^2]; positive for counterclockwise."""
     a, b, c = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
@@ -227,7 +227,7 @@ def _check_resolution(pts) -> None:
 
 def _orient(pts, tri, used):
     """Reject degenerate and inverted triangles; flip a clockwise mesh to counterclockwise."""
-    area = _signed_areas(pts, tri)
+    area = signed_areas(pts, tri)
     p = pts[tri]
     mean_edge = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=2).mean(axis=1)
     bad = np.flatnonzero(np.abs(area) <= 1e-12 * mean_edge**2)

@@ -184,7 +184,10 @@ def _number(key, v, positive=False, integer=False):
         return v
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise SceneFileError(key, f"expected a number, got {_describe(v)}")
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:          # TOML integers have any number of digits
+        raise SceneFileError(key, f"expected a finite number, got an integer of {len(str(abs(v)))} digits") from None
     if not math.isfinite(v):
         raise SceneFileError(key, f"expected a finite number, got {v}")
     if positive and v <= 0:
@@ -498,7 +501,7 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     # the words and numbers an eager squeeze would warn with
     warnings.extend(validate.unit_problems(
         size=float(np.max(np.ptp(mesh.points, axis=0))), radius=float(fingers.radius), depth=float(depth),
-        E=float(material.E), thickness=float(material.thickness))[1])
+        E=float(material.E), thickness=float(material.thickness), between=_grip_distance(mesh, grip))[1])
     scene = None
     try:
         scene = Scene(mesh=mesh, material=material, fingers=fingers, grip=grip, friction=friction, depth=depth,

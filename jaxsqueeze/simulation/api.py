@@ -262,16 +262,25 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         _GROWN[_grow_key(scene, op, cfg)] = bigger
         cfg = bigger
         res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
-    if concrete and scene.placement is not None and np.ndim(res.status) == 0 and \
-            int(res.status) == Status.INVALID_INPUT:
+    if concrete and np.ndim(res.status) == 0:
         a, b = np.asarray(op.points)[boundary.positions(op.nodes, res.grip)] * float(op.length)
-        raise ValueError(f"depth = {float(scene.depth):g} m: expected a depth smaller than the distance between the "
-                         f"fingers' first contacts, {float(np.linalg.norm(a - b)):.4g} m for this placement; "
-                         "squeeze less deep, or place the fingers farther apart.")
+        between, depth = float(np.linalg.norm(a - b)), float(scene.depth)
+        if scene.placement is not None and int(res.status) == Status.INVALID_INPUT:
+            raise ValueError(f"depth = {depth:g} m: expected a depth smaller than the distance between the "
+                             f"fingers' first contacts, {between:.4g} m for this placement; "
+                             "squeeze less deep, or place the fingers farther apart.")
+        if validate.deep_warning(float(op.length), depth) is None:     # (that one was said before the run)
+            deep = validate.deep_warning(None, depth, between)
+            if deep:
+                warnings.warn(deep, stacklevel=2)
     if op.field is not None:
         u = field_displacement(op, F_hat, g_hat)
         u = as_array(np.asarray(u) * np.asarray(op.length), u.dtype) if is_concrete(u) else u * op.length
         res = dataclasses.replace(res, displacement=u)
+        if concrete and np.ndim(res.count) == 0 and isinstance(scene.mesh, Mesh):
+            flipped = validate.inverted_warning(scene.mesh.points, scene.mesh.triangles, u, float(res.final_depth))
+            if flipped:
+                warnings.warn(flipped, stacklevel=2)
     if trim and np.ndim(res.count) == 0 and is_concrete(res):   # eager, unbatched
         res = trim_result(res)
     if throw:

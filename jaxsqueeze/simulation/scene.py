@@ -21,6 +21,13 @@ from ..numbers import real_array
 
 
 
+def _holds_bool(x) -> bool:
+    """Whether nested lists/tuples hold a bool (numpy reads [0.1, True] as floats)."""
+    if isinstance(x, (list, tuple)):
+        return any(_holds_bool(v) for v in x)
+    return isinstance(x, (bool, np.bool_))
+
+
 @jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class Fingers:
@@ -52,7 +59,8 @@ class Fingers:
             raise ValueError(f"Fingers.rotation rows have different lengths {rows}: "
                              "give both fingers k coefficients, padding the shorter polynomial with leading zeros "
                              "(highest power first).")
-        if self.rotation is not None and is_concrete(self.rotation) and np.asarray(self.rotation).dtype.kind in "cSU":
+        if self.rotation is not None and is_concrete(self.rotation) and (
+                np.asarray(self.rotation).dtype.kind in "bcSU" or _holds_bool(self.rotation)):
             raise ValueError(f"Fingers.rotation = {np.asarray(self.rotation).tolist()!r:.60}: expected real "
                              "polynomial coefficients [rad] of shape (2, k)")
         if self.rotation is not None and numeric(self.rotation):
@@ -143,6 +151,9 @@ TRACED_SLOTS = 64
 #: sliding contacts an eager Coulomb squeeze solves for under ``Settings.sliding_capacity = None``
 #: (doubled on overflow)
 EAGER_SLIDING = 8
+#: the largest ``Settings.newton_iters`` and ``bisect_iters``: a bisection from one metre
+#: reaches float64's smallest numbers in ~1,100 halvings (the loops count in int32)
+MAX_ITERS = 10_000
 
 
 @jax.tree_util.register_dataclass
@@ -172,8 +183,9 @@ class Settings:
         faster) and a smaller one runs faster.
     max_steps: bound on loop iterations (steps plus event resolutions), static.
     max_events: capacity of the event log, static.
-    newton_iters: Newton iteration bound, static.
-    bisect_iters: iteration bound for locating an event (regula falsi + bisection), static.
+    newton_iters: Newton iteration bound, static, at most ``MAX_ITERS``.
+    bisect_iters: iteration bound for locating an event (regula falsi + bisection), static,
+        at most ``MAX_ITERS``.
     fused: compile the squeeze loop into one CPU kernel (static; default False): the same
         result, each squeeze ~35 % faster (the foam square: 3.4 against 5.3 ms) for ~1.9 s
         more compile (4.5 against 2.5 s), which pays off from ~1,000 squeezes
@@ -292,6 +304,8 @@ class Scene:
                              "use scene.replace(grip=None, placement=...) or scene.replace(placement=None, grip=...).")
         if numeric(self.grip) and self.placement is None:
             g = np.asarray(self.grip)
+            if isinstance(self.grip, (tuple, list)) and all(isinstance(v, (int, np.integer)) for v in self.grip):
+                g = np.array([int(v) for v in self.grip])   # (int64 with uint64 promotes to float64)
             flags = isinstance(self.grip, (tuple, list)) and any(isinstance(v, (bool, np.bool_)) for v in self.grip)
             if g.shape[-1:] != (2,) or not np.issubdtype(g.dtype, np.integer) or flags:
                 raise ValueError(f"grip={self.grip!r} must be two integer boundary node indices (i, j).")
@@ -317,6 +331,10 @@ class Scene:
                 continue
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"Settings.{name}={v!r} must be a positive integer.")
+            if name.endswith("_iters") and v > MAX_ITERS:      # the loops count in int32: 2**31 wrapped to < 0
+                raise ValueError(f"Settings.{name}={v!r} is more than {MAX_ITERS:,} iterations: Newton's method "
+                                 "and the event bisection converge in tens (default 30 and 40); give a bound "
+                                 f"from 1 to {MAX_ITERS}.")
         if s.capacity is not None and s.capacity < 2:
             raise ValueError("Settings.capacity must be at least 2 (one contact per finger).")
         for name in ("step", "event_tol", "newton_tol", "gap_tol"):

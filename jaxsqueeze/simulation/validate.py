@@ -617,20 +617,41 @@ def shape_problems(scene) -> list[str]:
 DEEP = 0.5
 
 
-def deep_warning(size: float, depth: float) -> str | None:
-    """The warning for a squeeze deeper than :data:`DEEP` of the object's size [m], or None."""
-    if not DEEP * size < depth < size:
+def deep_warning(size: float | None, depth: float, between: float | None = None) -> str | None:
+    """The warning for a squeeze deeper than :data:`DEEP` of the object's size [m], or (given)
+    of ``between``, the distance between the fingers' first contacts [m] (a narrow part
+    squeezed across, in an object long the other way); or None."""
+    for length, what in ((size, "the object ({:g} m across)"),
+                         (between, "the distance between the fingers' first contacts ({:g} m)")):
+        if length is not None and DEEP * length < depth < length:
+            return (f"depth = {depth:g} m is more than {DEEP:.0%} of {what.format(length)}: linear elasticity (small strains) "
+                    "is far from true there, and elements may turn inside out; the paper's squeezes "
+                    "stop near 15 %")
+    return None
+
+
+def inverted_warning(points, triangles, u, depth: float) -> str | None:
+    """The warning for triangles that a squeeze to ``depth`` [m] turned inside out, or None:
+    ``points`` (n, 2) and ``triangles`` (t, 3) of the mesh (counterclockwise), ``u`` (n, 2)
+    the final displacement [m]. Linear elasticity does not see it (its energy is that of the
+    mirrored element), so the squeeze itself reports no failure."""
+    from ..geometry.mesh import signed_areas
+    points, triangles = np.asarray(points, float), np.asarray(triangles)
+    ratio = signed_areas(points + np.asarray(u, float), triangles) / signed_areas(points, triangles)
+    flipped = int(np.sum(ratio <= 0))
+    if not flipped:
         return None
-    return (f"depth = {depth:g} m is more than {DEEP:.0%} of the object ({size:g} m across): linear elasticity "
-            "(small strains) is far from true there, and elements may turn inside out unseen; the paper's "
-            "squeezes stop near 15 %")
+    return (f"at depth = {depth:g} m {flipped} of {len(triangles)} triangles are turned inside out (area ratio down "
+            f"to {float(np.min(ratio)):.2g}): the squeeze is far beyond small strains; squeeze less deep "
+            "(result.depth gives the rows before), or grip where the object is wider")
 
 
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
-                  thickness=None) -> tuple[list[str], list[str]]:
+                  thickness=None, between=None) -> tuple[list[str], list[str]]:
     """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.
 
-    ``size`` is the object's extent [m] (the larger bounding-box side). Errors where the
+    ``size`` is the object's extent [m] (the larger bounding-box side), ``between`` the
+    distance between the fingers' first contacts [m] where known (:func:`deep_warning`). Errors where the
     result would be meaningless (a depth as large as the object); warnings where the numbers
     differ by orders of magnitude from each other (a length in millimetres among metres, E in
     MPa): a fingertip more than 10 times the object or under a thousandth of it, a plate
@@ -652,7 +673,7 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
                      f"across), where plane stress describes a thin plate; {hint}")
     if size is not None and size > 10:
         warns.append(f"the object is {size:g} m across; {hint}")
-    deep = deep_warning(size, depth) if size is not None and depth is not None else None
+    deep = deep_warning(size, depth, between) if size is not None and depth is not None else None
     if deep:
         warns.append(deep)
     if size is not None and depth is not None and depth < 1e-6 * size:
@@ -668,4 +689,4 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
            "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
            "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
-           "shape_problems", "unit_problems", "deep_warning", "boundary_points", "force_limit"]
+           "shape_problems", "unit_problems", "deep_warning", "inverted_warning", "boundary_points", "force_limit"]

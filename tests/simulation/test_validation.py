@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -328,6 +329,10 @@ def test_mixed_units():
     (dict(method=["sparse"]), ValueError, r"method=\['sparse'\]; choose one of"),
     (dict(settings=jsq.Settings(fused="no")), ValueError, "Settings.fused='no' must be True or False"),
     (dict(settings=jsq.Settings(max_steps=True)), ValueError, "Settings.max_steps=True must be a positive integer"),
+    # the loops count in int32: 2**31 wrapped to a negative bound (NEWTON_FAILURE advising more
+    # iterations; a bisection that never ran gave SUCCESS with spurious events), 2**63 overflowed
+    (dict(settings=jsq.Settings(newton_iters=2**31)), ValueError, "Settings.newton_iters=2147483648 is more than 10,000"),
+    (dict(settings=jsq.Settings(bisect_iters=np.uint64(2**63))), ValueError, "Settings.bisect_iters=.* is more than 10,000"),
 ])
 def test_wrong_types_and_sizes_are_named(square, change, error, message):
     """Each fails before any tracing, with the field and what it should be (they reached
@@ -336,11 +341,57 @@ def test_wrong_types_and_sizes_are_named(square, change, error, message):
         jsq.squeeze(_scene(square, **change))
 
 
-@pytest.mark.parametrize("rotation", [[[0.1j, 0.0], [0.0, 0.0]], np.array([["0.1"], ["0"]])])
-def test_a_rotation_of_complex_or_text_coefficients_is_named(rotation):
-    """(complex reached a bare float() TypeError inside grasp_of; numpy would drop its imaginary part)"""
+@pytest.mark.parametrize("rotation", [[[0.1j, 0.0], [0.0, 0.0]], np.array([["0.1"], ["0"]]),
+                                      [[True, False], [False, True]], [[0.1, True], [0.0, 0.0]]])
+def test_a_rotation_of_complex_text_or_boolean_coefficients_is_named(rotation):
+    """(complex reached a bare float() TypeError inside grasp_of; numpy would drop its imaginary
+    part; booleans squeezed as 1 rad/m and 1 rad, refused everywhere else)"""
     with pytest.raises(ValueError, match=r"Fingers.rotation = .*: expected real polynomial coefficients"):
         jsq.Fingers(radius=0.01, rotation=rotation)
+
+
+def test_a_grip_of_integers_of_mixed_numpy_kinds_is_taken(square):
+    """numpy promotes int64 with uint64 to float64: the grip was refused as "must be two integer
+    boundary node indices" though both are integers."""
+    sc = _scene(square)
+    i, j = sc.grip
+    for grip in ((np.int64(i), np.uint64(j)), (i, np.uint64(j)), (np.uint8(i), np.int64(j))):
+        assert [int(v) for v in sc.replace(grip=grip).grip] == [i, j]
+    with pytest.raises(ValueError, match="must be two integer boundary node indices"):
+        sc.replace(grip=(np.int64(i), True))
+
+
+def test_a_squeeze_across_a_narrow_part_warns_and_counts_the_triangles_it_turns_inside_out():
+    """A 100 mm x 20 mm strip squeezed across its width to 88 %: SUCCESS with no word (the deep
+    squeeze warning compared the depth with the object's 0.1 m only) and two triangles turned
+    inside out. Now one warning compares the depth with the grip distance, in the squeeze and in
+    a scene file, and another counts the inverted triangles (the oracle: signed areas in numpy)."""
+    from jaxsqueeze.io import scenefile
+    strip = jsq.shapes.rectangle(0.1, 0.02, max_edge=0.005)
+    b, P = np.asarray(strip.boundary), strip.points + strip.offset
+    grip = tuple(int(b[np.argmin(np.linalg.norm(P[b] - q, axis=1))]) for q in ([0.0, -0.01], [0.0, 0.01]))
+    sc = jsq.Scene(mesh=strip, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
+                   fingers=jsq.Fingers(radius=0.005), grip=grip, friction=0.5, depth=0.018)
+    with pytest.warns(UserWarning) as said:
+        res = jsq.squeeze(sc)
+    texts = [str(w.message) for w in said]
+    assert res.outcome == jsq.Status.SUCCESS
+    assert any("more than 50% of the distance between the fingers' first contacts (0.02 m)" in t for t in texts), texts
+    x0, x1, tri = strip.points, strip.points + np.asarray(res.displacement), np.asarray(strip.triangles)
+    def area(x):
+        (ax, ay), (bx, by) = (x[tri[:, 1]] - x[tri[:, 0]]).T, (x[tri[:, 2]] - x[tri[:, 0]]).T
+        return ax * by - ay * bx
+    flipped = int(np.sum(area(x1) / area(x0) <= 0))
+    assert flipped >= 1
+    assert any(t.startswith(f"at depth = 0.018 m {flipped} of {len(tri)} triangles are turned inside out") for t in texts)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")           # a squeeze of 15 % says neither
+        jsq.squeeze(sc.replace(depth=0.003))
+    text = ("[object]\nshape = \"rectangle\"\nwidth = 0.1\nheight = 0.02\nmax_edge = 0.005\n[material]\nE = 1e5\n"
+            "nu = 0.3\nthickness = 0.0254\n[fingers]\nradius = 0.005\n[grip]\npoints = [[0.0, -0.01], [0.0, 0.01]]\n"
+            "[squeeze]\nrelative_depth = 0.6\n")
+    assert any("of the distance between the fingers' first contacts" in w
+               for w in scenefile.load_text(text).warnings)
 
 
 def test_a_scene_without_an_object_or_with_two_grips_is_named(square):
