@@ -624,9 +624,9 @@ def deep_warning(size: float | None, depth: float, between: float | None = None)
     for length, what in ((size, "the object ({:g} m across)"),
                          (between, "the distance between the fingers' first contacts ({:g} m)")):
         if length is not None and DEEP * length < depth < length:
-            return (f"depth = {depth:g} m is more than {DEEP:.0%} of {what.format(length)}: linear elasticity (small strains) "
-                    "is far from true there, and elements may turn inside out; the paper's squeezes "
-                    "stop near 15 %")
+            return (f"depth = {depth:g} m is more than {DEEP:.0%} of {what.format(length)}: linear elasticity "
+                    "(small strains) is far from true there, and elements may turn inside out; the paper's "
+                    "squeezes stop near 15 %")
     return None
 
 
