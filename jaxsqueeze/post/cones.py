@@ -150,7 +150,8 @@ def _unpack(obj):
     if isinstance(obj, Compliance):
         return None, obj, None, None
     if hasattr(obj, "mesh") and hasattr(obj, "material"):          # a Scene
-        mu = float(obj.friction) if obj.friction_model == "coulomb" else 0.0
+        # full stick: cones of half angle π/2 (atan ∞; only pushing is needed), frictionless: 0
+        mu = {"coulomb": float(obj.friction), "stick": np.inf}.get(obj.friction_model, 0.0)
         return obj.mesh, None, float(obj.material.E), mu
     return obj, None, None, None
 
@@ -199,7 +200,8 @@ def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) ->
             E only for the rotation: pass a Scene), or the compliance operator.
         axis: "surface" (inward normal of the deformed object) or "fingertip" (fingertip
             centre to contact node); see the module docstring.
-        friction: Coulomb mu for the margin (default: the scene's; NaN margins without it).
+        friction: Coulomb mu for the margin (default: the scene's; under full stick cones of half angle
+            pi/2, frictionless 0; NaN margins without it).
     Returns:
         :class:`ConeAxes`.
     """
@@ -268,6 +270,8 @@ def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) ->
                 later = nxt[nxt > r]
                 if later.size:
                     fdir[r, f] = fdir[later[0], f]
+                else:                 # no row with a force: no direction (it read as along the axis)
+                    fdir[r, f] = np.nan
     margin = (np.arctan(mu) - _angle(fdir, ax)) if mu is not None else np.full((k, 2), np.nan)
     rel = depth / views.grip_distance(res)
     return ConeAxes(depth, rel, node, contact, ax, line, force, psi, rotation, toward, margin, axis)

@@ -78,9 +78,18 @@ SAME_PLACE = 1e-4
 def check_object(res, obj, what: str = "mesh"):
     """The mesh or band of ``obj`` (a mesh, band, scene or compliance operator); ValueError
     unless it is the object ``res`` was computed for: as many boundary (and mesh) nodes, and
-    its grip nodes where the result had them (:func:`grip_positions`, to :data:`SAME_PLACE`)."""
-    obj = getattr(obj, "mesh", obj)
+    its grip nodes where the result had them (:func:`grip_positions`, to :data:`SAME_PLACE`);
+    a scene also its fingertip radius and, for a result that reached its depth, that depth."""
     fix = f"pass the {what} the result was computed for"
+    if hasattr(obj, "fingers") and hasattr(obj, "depth"):            # a Scene
+        from ..simulation.status import Status
+        r, radius = float(res.radius), float(obj.fingers.radius)
+        if not np.isclose(r, radius, rtol=1e-6, atol=0):
+            raise ValueError(f"the {what}'s fingertip radius is {radius:g} m but the result's {r:g} m: {fix}")
+        d, depth = float(res.final_depth), float(obj.depth)
+        if int(res.status) == Status.SUCCESS and not np.isclose(d, depth, rtol=1e-6, atol=0):
+            raise ValueError(f"the result reached depth {d:g} m (SUCCESS) but the {what} asks for {depth:g} m: {fix}")
+    obj = getattr(obj, "mesh", obj)
     m = len(np.asarray(obj.boundary)) if hasattr(obj, "boundary") else obj.m
     got = np.shape(res.modes)[-1]
     if m != got:
@@ -209,6 +218,9 @@ def contact_regions(res, row: int = -1, loops=None) -> list[list[dict]]:
     nodes = np.asarray(res.nodes)
     radius = float(res.radius)
     loops = (len(modes),) if loops is None else tuple(int(v) for v in loops)
+    if sum(loops) != len(modes) or min(loops) < 1:
+        raise ValueError(f"loops={loops}: expected the lengths of the boundary loops (mesh.loops), adding up to "
+                         f"the result's {len(modes)} boundary nodes")
     out = []
     for f in range(np.asarray(res.centres).shape[1]):
         regions = []
@@ -405,7 +417,16 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     u = np.asarray(op.field.solve(f_hat), float).reshape(-1, 2) * L
     g = np.asarray(res.rigid[r], float) / [L, L, 1.0]                 # scaled: (t_x / L, t_y / L, rotation)
     N_all = rigid_modes(np.asarray(op.field.points), xp=np)
-    return u + (N_all @ g).reshape(-1, 2) * L
+    u = u + (N_all @ g).reshape(-1, 2) * L
+    # an operator of the same object built for another material (E, ν, thickness) passes the
+    # checks above and gives another field: its boundary must be the row's recorded one
+    ub, want = u[np.asarray(op.nodes)], np.asarray(res.boundary_displacement[r], float)
+    off, scale = float(np.max(np.abs(ub - want), initial=0.0)), float(np.max(np.abs(want), initial=0.0))
+    if off > 1e-4 * scale:
+        raise ValueError(f"the operator does not reproduce the result's boundary displacement at row {r} (off by "
+                         f"{off:.3g} m of {scale:.3g} m): it was built for another material (E, nu, thickness) "
+                         "than the result; pass scene.operator() of the squeezed scene")
+    return u
 
 
 def json_ready(x):

@@ -112,7 +112,7 @@ class SqueezeResult:
     invalid: () int, index into ``validate.FIELDS`` of the first invalid input, -1 if none.
     margin: () smooth feasibility margin of the grip [rad]: the friction angle minus the larger
         angle between the segment joining the first contacts and their inward normals; < 0
-        infeasible (−π when a placed finger cannot touch the object).
+        infeasible (−π when a placed finger cannot touch the object; its one row then has no contact).
     squeeze_status: () the status the squeeze phase ended with (``status`` is the final one,
         after the adversary push when there is one).
     push_work: (3,) work during the adversary push [J]: done by the pusher on the object, and
@@ -242,6 +242,9 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     n_ev = jnp.minimum(st.n_ev, ev_d.shape[0])
     ev_n, ev_k, ev_f = (jnp.where(jnp.arange(ev_d.shape[0]) < n_ev, a, -1) for a in (ev_n, ev_k, ev_f))   # padding
     gs = jnp.array([L, L, 1.0], st.g.dtype)
+    # a placed finger that cannot touch the object (margin −π, INFEASIBLE_GRIP): its one row
+    # records where the fingertips were placed, so no node is in contact
+    mode = jnp.where(st.margin <= -jnp.pi, jnp.zeros_like(mode), mode)
     return SqueezeResult(
         status=st.status, depth=pad(depth) * L, modes=pad(mode), finger=pad(finger), theta=pad(theta),
         forces=pad(F) * Fs, boundary_displacement=pad(u) * L, centres=pad(C) * L, alpha=pad(alpha),

@@ -392,8 +392,8 @@ def test_post_consumers_honour_count_of_a_jit_result(tmp_path):
     spec = scenefile.load_text(SCENE.replace("refine_edge = 0.003\nrefine_radius = 0.012\n", "")
                                .replace("points = [[-0.005, -0.05], [0.005, 0.05]]",
                                         "points = [[0.0, -0.05], [0.0, 0.05]]"))
-    scene = spec.scene
-    eager = jsq.squeeze(scene.replace(depth=0.004))
+    scene = spec.scene.replace(depth=0.004)        # (the summary refuses a scene of another depth)
+    eager = jsq.squeeze(scene)
     k, e = int(eager.count), int(eager.n_events)
     # pad it as a jit result is: rows repeat the last state, the event log is zero-filled
     pad = lambda a: np.concatenate([a, np.repeat(a[-1:], 60, axis=0)])  # noqa: E731

@@ -120,6 +120,12 @@ def test_a_placed_finger_that_cannot_touch_is_summarised_plotted_and_exported(of
     res = jsq.squeeze(placed, op)
     assert res.status == jsq.Status.INFEASIBLE_GRIP and float(res.margin) == pytest.approx(-np.pi)
     assert np.all(np.isnan(views.grip_positions(res))) and views.summary(res)["grip_distance"] is None
+    # no node is in contact (row 0 listed both placed nodes as sticking, and the plot drew them);
+    # without a force the cones have no margin (it read atan μ, a force on the cone axis)
+    assert not np.any(np.asarray(res.modes) > 0) and views.contact_regions(res) == [[], []]
+    from jaxsqueeze.post import cones
+    with pytest.raises(ValueError, match="no contact with a finite force"):
+        cones.grasp_stability(res, placed)
     P = np.asarray(scene.mesh.points)
     s = views.summary(res, placed)
     assert s["status"] == "INFEASIBLE_GRIP"
@@ -201,3 +207,38 @@ def test_cone_axes_refuse_a_friction_no_scene_could_have(offset):
     assert ok.sum() > 0
     np.testing.assert_allclose((own.margin - given.margin)[ok], np.arctan(0.5) - np.arctan(0.3), rtol=1e-12)
     np.testing.assert_array_equal(own.axis, given.axis)
+
+
+def test_views_refuse_a_scene_operator_or_loops_the_result_was_not_computed_with(offset):
+    """A scene of the same mesh and grip but another fingertip radius or depth was summarised
+    as SUCCESS at 10 mm beside a target of 30 mm, with the scene's radius; an operator of the
+    same object built for another E or ν rebuilt rows 0.4–4.4 mm off and exported them as exact
+    fields; loops that do not add up to the boundary dropped or split contact regions."""
+    scene, op, res = offset
+    for other, match in ((scene.replace(fingers=jsq.Fingers(radius=0.002)), "fingertip radius is 0.002 m but"),
+                         (scene.replace(depth=0.03), r"reached depth 0.01 m \(SUCCESS\) but the scene asks for 0.03")):
+        with pytest.raises(ValueError, match=match):
+            views.summary(res, other)
+    assert views.summary(res, scene)["status"] == "SUCCESS"
+    for mat in (jsq.Material(E=2e5, nu=0.3, thickness=0.0254), jsq.Material(E=1e5, nu=0.45, thickness=0.0254)):
+        with pytest.raises(ValueError, match="built for another material"):
+            views.row_displacement(res, scene.replace(material=mat).operator(), len(res.depth) // 2)
+    m = np.shape(res.modes)[-1]
+    for loops in ((10,), (m // 2, m - m // 2 + 1), (500,)):
+        with pytest.raises(ValueError, match="adding up to the result's"):
+            views.contact_regions(res, loops=loops)
+
+
+def test_cones_under_full_stick_have_half_angle_pi_over_2(offset):
+    """Full stick needs only pushing: the cones are half-planes (laws.grip_half_angle). The
+    margins were taken with μ = 0 (every contact outside its cone, "breaking", slip at depth 0)."""
+    from jaxsqueeze.post import cones
+    scene, _, _ = offset
+    stick = scene.replace(friction_model="stick")
+    res = jsq.squeeze(stick)
+    c = cones.cone_axes(res, stick)
+    F, a = np.asarray(c.force[-1]), np.asarray(c.axis[-1])
+    angle = np.arctan2(np.abs(F[:, 0] * a[:, 1] - F[:, 1] * a[:, 0]), np.sum(F * a, -1))
+    np.testing.assert_allclose(c.margin[-1], np.pi / 2 - angle, rtol=0, atol=1e-12)
+    assert np.all(c.margin[-1] > 1.0)
+    assert cones.grasp_stability(res, stick).surface_slip_depth is None
