@@ -153,6 +153,11 @@ def _unpack(obj):
         # full stick: cones of half angle π/2 (atan ∞; only pushing is needed), frictionless: 0
         mu = {"coulomb": float(obj.friction), "stick": np.inf}.get(obj.friction_model, 0.0)
         return obj.mesh, None, float(obj.material.E), mu
+    from ..geometry.mesh import Mesh
+    from ..mechanics.band import Band
+    if not isinstance(obj, (Mesh, Band)):
+        raise TypeError(f"expected the jsq.Scene the result was computed for (or its Mesh, Band or compliance "
+                        f"operator), got {type(obj).__name__}")
     return obj, None, None, None
 
 

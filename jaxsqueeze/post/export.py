@@ -94,7 +94,11 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
 
     res = views.trimmed(res)
     mesh = views.check_object(res, mesh)
-    if not isinstance(name, str) or not name or os.sep in name or name in (".", ".."):
+    if op is not None:
+        views.check_object(res, op, "operator", takes=("operator",))
+    if isinstance(name, str) and name.endswith(".xdmf"):       # (it wrote x.xdmf.xdmf)
+        name = name[:-len(".xdmf")]
+    if not isinstance(name, str) or not name.strip() or os.sep in name or name in (".", ".."):
         raise ValueError(f"name = {name!r}: expected a file name without a folder (e.g. 'squeeze')")
     path_dir = views.make_folder(path_dir)
     path = os.path.join(path_dir, f"{name}.xdmf")

@@ -246,11 +246,13 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
     """Fig. 5 analogue: force density (top) and force direction (bottom) against arc length
     along the contact, finger 0 (left) and finger 1 (right), one curve per selected row.
 
-    ``rows`` defaults to the rows nearest 25, 50, 75 and 100 % of the final depth. Markers
+    ``rows`` (row indices, or one) defaults to the rows nearest 25, 50, 75 and 100 % of the final depth. Markers
     are nodal values (filled: stick, open: slip); lines are cubic splines through them.
     """
     res = views.trimmed(res)
     mesh = None if mesh is None else views.check_object(res, mesh)
+    if isinstance(rows, (int, np.integer)) and not isinstance(rows, (bool, np.bool_)):
+        rows = [rows]                                      # one row
     rows = default_rows(res) if rows is None else [views.row_index(res, r) for r in rows]
     if not rows:
         raise ValueError("rows is empty: name at least one recorded row, or pass rows=None for the rows "
@@ -379,7 +381,7 @@ def save_all(res, scene, outdir) -> dict:
     Returns {name: path}.
     """
     res = views.trimmed(res)
-    views.check_object(res, scene, "scene")
+    views.check_object(res, scene, "scene", takes=("scene",))
     outdir = views.make_folder(outdir)
     mesh = scene.mesh
     figs = dict(deformed=plot_deformed(res, mesh), force_profile=plot_force_profile(res, mesh=mesh),

@@ -36,6 +36,10 @@ def trimmed(res):
     consumer in ``jaxsqueeze.post`` calls this first. A batched result (from ``vmap``) must be
     indexed to one lane first.
     """
+    from ..simulation.result import SqueezeResult
+    if not isinstance(res, SqueezeResult):
+        raise TypeError(f"expected a squeeze result (the jsq.SqueezeResult jsq.squeeze returns), got "
+                        f"{type(res).__name__}")
     count = getattr(res, "count", None)
     if count is None:
         return res
@@ -75,12 +79,26 @@ def make_folder(path, what: str = "output folder") -> str:
 SAME_PLACE = 1e-4
 
 
-def check_object(res, obj, what: str = "mesh"):
-    """The mesh or band of ``obj`` (a mesh, band, scene or compliance operator); ValueError
-    unless it is the object ``res`` was computed for: as many boundary (and mesh) nodes, and
-    its grip nodes where the result had them (:func:`grip_positions`, to :data:`SAME_PLACE`);
-    a scene also its fingertip radius and, for a result that reached its depth, that depth."""
+def _kinds():
+    from ..geometry.mesh import Mesh
+    from ..mechanics.band import Band
+    from ..mechanics.operator import Compliance
+    from ..simulation.scene import Scene
+    return {"scene": Scene, "mesh": Mesh, "band": Band, "operator": Compliance}
+
+
+def check_object(res, obj, what: str = "mesh", takes=("scene", "mesh", "band")):
+    """The mesh or band of ``obj`` (one of ``takes``: "scene", "mesh", "band", "operator" for
+    the compliance operator); TypeError for another kind of object, ValueError unless it is the
+    object ``res`` was computed for: as many boundary (and mesh) nodes, and its grip nodes
+    where the result had them (:func:`grip_positions`, to :data:`SAME_PLACE`); a scene also
+    its fingertip radius and, for a result that reached its depth, that depth."""
     fix = f"pass the {what} the result was computed for"
+    kinds = _kinds()
+    if not isinstance(obj, tuple(kinds[k] for k in takes)):
+        names = " or ".join({"scene": "the jsq.Scene", "mesh": "its jsq.Mesh", "band": "its Band",
+                             "operator": "its compliance operator (scene.operator())"}[k] for k in takes)
+        raise TypeError(f"expected the {what} the result was computed for ({names}), got {type(obj).__name__}")
     if hasattr(obj, "fingers") and hasattr(obj, "depth"):            # a Scene
         from ..simulation.status import Status
         r, radius = float(res.radius), float(obj.fingers.radius)
@@ -406,7 +424,7 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
     the row's recorded rigid part g. ``op`` is ``scene.operator()``; it must carry a field map.
     """
     res = trimmed(res)
-    check_object(res, op, "operator")
+    check_object(res, op, "operator", takes=("operator",))
     from ..mechanics.operator import rigid_modes
 
     if op.field is None:
@@ -460,7 +478,7 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     """
     res = trimmed(res)
     if scene is not None:
-        check_object(res, scene, "scene")
+        check_object(res, scene, "scene", takes=("scene",))
     from ..simulation.status import Status
 
     st = Status(int(res.status))

@@ -242,3 +242,30 @@ def test_cones_under_full_stick_have_half_angle_pi_over_2(offset):
     np.testing.assert_allclose(c.margin[-1], np.pi / 2 - angle, rtol=0, atol=1e-12)
     assert np.all(c.margin[-1] > 1.0)
     assert cones.grasp_stability(res, stick).surface_slip_depth is None
+
+
+def test_post_functions_name_a_wrong_kind_of_argument(offset, tmp_path):
+    """A mesh where the scene belongs, arguments swapped or None, a scene where the operator
+    belongs, an operator where the mesh belongs: each raised an AttributeError from inside
+    ('Mesh' object has no attribute 'mesh', ...); now a TypeError that names what was expected.
+    A name ending in .xdmf wrote x.xdmf.xdmf; one row given as an int failed in iteration."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from jaxsqueeze.post import cones, export, plots
+    scene, op, res = offset
+    for call, match in [
+            (lambda: plots.save_all(res, scene.mesh, tmp_path), r"the scene .* \(the jsq.Scene\), got Mesh"),
+            (lambda: views.summary(res, scene.mesh), r"\(the jsq.Scene\), got Mesh"),
+            (lambda: plots.save_all(scene, res, tmp_path), "expected a squeeze result .* got Scene"),
+            (lambda: views.summary(None), "expected a squeeze result .* got NoneType"),
+            (lambda: views.row_displacement(res, scene), r"compliance operator \(scene.operator\(\)\)\), got Scene"),
+            (lambda: export.write_paraview(tmp_path, res, scene, op=scene), "got Scene"),
+            (lambda: plots.plot_deformed(res, op), "got Compliance"),
+            (lambda: cones.cone_axes(res, None), "got NoneType")]:
+        with pytest.raises(TypeError, match=match):
+            call()
+    path = export.write_paraview(tmp_path, res, scene, name="run.xdmf")
+    assert path.endswith(os.sep + "run.xdmf") and os.path.exists(path)
+    with pytest.raises(ValueError, match="expected a file name"):
+        export.write_paraview(tmp_path, res, scene, name=" ")
+    assert len(plots.plot_force_profile(res, rows=-1).axes[0].lines) >= 1
