@@ -60,6 +60,10 @@ def plan_settings(table: dict) -> PlanSettings:
             out[key] = value
         else:
             errors.append(f"plan.{key}: expected {want}, got {value!r}")
+    if "push_angle" in out and not math.cos(out["push_angle"]) > 0:
+        errors.append(f"plan.push_angle: expected an angle from the inward normal below pi/2 in size [rad], got "
+                      f"{out['push_angle']!r}: the pusher would move along the surface or away from it and push "
+                      "nothing (every placement INFEASIBLE_GRIP)")
     if not out.get("push", 0.0) > 0:       # without a push there is no adversary to place or turn
         errors += [f"plan.{key}: sets the adversary's push, which needs plan.push > 0 [m]; got no push"
                    for key in ("push_at", "push_angle") if key in out]

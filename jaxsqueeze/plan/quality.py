@@ -96,7 +96,14 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01, scene=None):
     ``scene``: the squeezed scene; needed for point contacts (``contact="point"``, e.g. bands),
     whose cone axis is the object's deformed surface normal, as in the squeeze (without it the
     margin is taken about the fingertip normal, which is the cone axis of segment contacts only).
+    Given the scene, its friction model also sets the cones, as in the squeeze: full stick
+    measures against cones of half angle π/2 (μ = ∞), frictionless against μ = 0 (every
+    contact slides: margin 0), whatever ``friction`` says (μ measured a full-stick map against
+    cones the squeeze never applied: margins down to −0.77).
     """
+    model = getattr(scene, "friction_model", "coulomb")
+    if model != "coulomb":
+        friction = jnp.inf if model == "stick" else 0.0
     surface = _surface(scene)
     batch = jnp.shape(res.depth)[:-1]
     if jnp.ndim(friction) == 0:

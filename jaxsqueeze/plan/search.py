@@ -47,6 +47,10 @@ ACCELERATOR_CHUNK = 1024   # per vmap chunk on an accelerator: on an H200 a vmap
 def quality_of(scene: Scene, quality) -> Callable:
     """A function result → () for a quality given by name (``QUALITIES``) or as a callable."""
     if callable(quality):
+        if quality is slip_margin:          # (it failed inside: "missing 1 required positional argument")
+            raise ValueError("quality=jsq.quality.slip_margin needs μ and the scene besides a result: pass "
+                             "quality=\"slip_margin\" (both from the scene), or "
+                             "lambda res: jsq.quality.slip_margin(res, mu, scene=scene)")
         return quality
     if quality == "slip_margin":
         mu = scene.friction
@@ -428,6 +432,10 @@ def check_search(optimizer, steps, starts, budget, init) -> None:
         if not np.all(np.isfinite(np.asarray(step))):
             raise ValueError(f"the optimizer's step from a unit gradient is {np.asarray(step).tolist()}, not "
                              "finite: check its learning rate (a finite number > 0, e.g. optax.adam(0.02))")
+        if float(jnp.sum(step)) > 0:           # optax minimizes: its step must go against the gradient
+            raise ValueError(f"the optimizer's step from a unit gradient is {np.asarray(step).tolist()}: along the "
+                             "gradient, so the search would walk downhill; pass a minimizer with a learning rate "
+                             "> 0 (optax.adam(0.02), optax.sgd(0.01); optax.scale needs a negative factor)")
     if init is not None:
         candidates(init, "init")
 
@@ -479,12 +487,17 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         order = np.argsort(-np.where(ok, summ.quality, -np.inf)) if len(X) else np.zeros(0, int)
         init = X[order[ok[order]]][:starts]
         if len(init) == 0:
-            raise ValueError("no feasible placement on the coarse map: refine coarse_spacing or change the scene")
+            seen = "no pair passed the cone test" if summ is None else ", ".join(
+                f"{Status(int(k)).name} {int(c)}" for k, c in zip(*np.unique(summ.status, return_counts=True)))
+            raise ValueError(f"no feasible placement on the coarse map ({seen}): pass a finer coarse_spacing "
+                             "(or, in a scene file, a finer plan.spacing), or change the scene")
     if budget is not None:
         steps = min(steps, (int(budget) - squeezes) // len(init) - 1)
         if steps < 0:
-            raise ValueError(f"budget={budget} squeezes is spent before the search starts ({squeezes} on the "
-                             "coarse map): raise the budget or coarsen coarse_spacing")
+            spent = f"{squeezes} on the coarse map" if squeezes else "no coarse map: init given"
+            raise ValueError(f"budget={budget} squeezes is spent before the search starts ({spent}; each of the "
+                             f"{len(init)} starts needs at least 1): raise the budget, or use fewer starts"
+                             + (" or a coarser coarse_spacing" if squeezes else " (rows of init)"))
     mask = np.array([1.0, 1.0, 1.0 if vary_angle else 0.0])
 
     scale_ = jnp.asarray(scale)

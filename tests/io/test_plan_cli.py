@@ -94,6 +94,23 @@ def test_plan_push_longer_than_the_object_is_an_input_error(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("edit, said", [
+    ("push = 0.002\npush_angle = 2.0", "error: plan.push_angle: expected an angle from the inward normal below pi/2"),
+    ("push = 0.002\noptimizer = \"scale\"", "along the gradient, so the search would walk downhill")])
+def test_plan_a_pusher_that_cannot_push_or_an_optimizer_that_descends_names_its_key(tmp_path, capsys, edit, said):
+    """push_angle = 2 rad (the pusher moves away from the surface): every cell INFEASIBLE_GRIP
+    and "no feasible placement on the coarse map: refine coarse_spacing", a key [plan] does not
+    have. optimizer = "scale" (optax.scale(learning_rate): no minus sign) climbed down and ended
+    with exit 0. Both: exit 2 before any squeeze."""
+    path = tmp_path / "scene.toml"
+    assert "push = 0.002" in SCENE
+    path.write_text(SCENE.replace("push = 0.002", edit))
+    code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and said in err, err
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("spacing, said", [("1e-7", "more than 10 per boundary node"), ("100.0", "at least 3")])
 def test_plan_spacing_too_fine_or_too_coarse_names_its_key(tmp_path, capsys, spacing, said):
     """plan.spacing of 1e-7 m said "error: spacing=..." without its key; 100 m was cut to 3

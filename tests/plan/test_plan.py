@@ -65,6 +65,18 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     for lr in (float("nan"), float("inf")):
         with pytest.raises(ValueError, match="not finite: check its learning rate"):
             jsq.optimize_placement(ellipse, "squeeze_work", optimizer=optax.sgd(lr), progress=False)
+    # a negative learning rate, or a transform without optax's minus sign, walked downhill and
+    # returned the start as the best, silently
+    for opt in (optax.sgd(-0.002), optax.scale(0.002)):
+        with pytest.raises(ValueError, match="along the gradient, so the search would walk downhill"):
+            jsq.optimize_placement(ellipse, "squeeze_work", optimizer=opt, progress=False)
+    # the documented function itself (a TypeError from inside: a missing positional argument);
+    # a budget below the given starts blamed a coarse map that never ran
+    with pytest.raises(ValueError, match='needs μ and the scene besides a result: pass quality="slip_margin"'):
+        jsq.optimize_placement(ellipse, Q.slip_margin, progress=False)
+    with pytest.raises(ValueError, match=r"budget=2 .*no coarse map: init given; each of the 3 starts"):
+        jsq.optimize_placement(ellipse, "squeeze_work", init=[[0.0, 0.1], [0.02, 0.12], [0.04, 0.14]], budget=2,
+                               progress=False)
     # a map's chunk, keep, processes and angle (chunk=0 looped forever, keep=-1 dropped the
     # last best candidate, a NaN angle squeezed NaN placements); a zero coarse spacing of a
     # search silently became the default
@@ -417,6 +429,22 @@ def test_slip_margin_is_continuous_where_a_contact_joins(square):
     for d in joins[:2]:
         below, above = (float(Q.slip_margin(jsq.squeeze(slanted.replace(depth=d + h)), mu)) for h in (-1e-9, 1e-9))
         assert 0.05 < below and abs(above - below) < 1e-6, (d, below, above)
+
+
+def test_slip_margin_takes_the_cones_of_the_scene_friction_model(square):
+    """Given the scene (as the planner passes it), full stick measures against cones of half
+    angle π/2 and frictionless against μ = 0, as the squeeze does; μ = scene.friction gave a
+    full-stick map negative margins (down to −0.77) and a frictionless one +0.44."""
+    from jaxsqueeze.plan.search import quality_of
+    for model, mu in (("stick", np.inf), ("frictionless", 0.0)):
+        sc = square.replace(friction_model=model)
+        res = jsq.squeeze(sc)
+        got = float(quality_of(sc, "slip_margin")(res))
+        assert got == float(Q.slip_margin(res, sc.friction, scene=sc)) == float(Q.slip_margin(res, mu))
+        if model == "stick":      # forces along the normals of the mirror-symmetric grip: reserve ≈ 1
+            assert 0.95 < got <= 1.0
+        else:                     # all slide, forces on the radius: 0 less τ log 2
+            assert got == pytest.approx(-0.01 * np.log(2), abs=1e-9)
 
 
 def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
