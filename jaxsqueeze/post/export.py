@@ -18,6 +18,11 @@ name                       shape    meaning
                                     pusher); -1 for a node in no contact
 ``full_field``             (n,)     1 where ``displacement`` is the exact full field at this row
 ``depth``                  (n,)     the row's squeeze depth [m] (the same at every node)
+``push``                   (n,)     the row's adversary push [m] (0 in squeeze rows and without
+                                    an adversary)
+``source_node``            (n,)     only for a mesh whose unused points were dropped: each
+                                    node's index in the mesh file or the points given
+                                    (``mesh.source``; the output numbers nodes as the mesh does)
 =========================  =======  ============================================================
 
 The full displacement field. A result stores it only at the final depth. Linear elasticity
@@ -75,9 +80,13 @@ def row_point_data(res, mesh, row: int, op=None) -> dict:
         u, full = views.row_displacement(res, op, r), 1
     else:
         u, full = ub, 0
-    return dict(displacement=_pad3(u), boundary_displacement=_pad3(ub), contact_force=_pad3(F),
-                mode=mode, finger=finger, full_field=np.full(n, full, np.int32),
-                depth=np.full(n, float(res.depth[r])))
+    out = dict(displacement=_pad3(u), boundary_displacement=_pad3(ub), contact_force=_pad3(F),
+               mode=mode, finger=finger, full_field=np.full(n, full, np.int32),
+               depth=np.full(n, float(res.depth[r])), push=np.full(n, float(np.asarray(res.push)[r])))
+    source = getattr(mesh, "source", None)
+    if source is not None:
+        out["source_node"] = np.asarray(source, np.int64)
+    return out
 
 
 def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:

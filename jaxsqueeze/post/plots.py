@@ -297,18 +297,21 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
     """Fig. 6 analogue: polar angle of every contact node against relative depth, per finger.
 
     Grey-blue line segments: the node sticks (its angle stays fixed); red: it slides.
-    Markers: C (stick→slip, ▲) and D (slip→stick, ▼) events.
+    Markers: C (stick→slip, ▲) and D (slip→stick, ▼) events. The squeeze's rows only: an
+    adversary's push rows all lie at the final depth (the title counts them).
     """
     res = views.trimmed(res)
     fig = Figure(figsize=(10, 5.5), dpi=DPI, layout="constrained")
     axs = fig.subplots(1, 2)
     ev = views.event_table(res)
+    squeeze = np.asarray(res.push) == 0        # an adversary's push rows share the final depth: left out
     for f, ax in zip((0, 1), axs):
         sp = views.sliding_profile(res, f)
-        x = 100 * sp.relative_depth
+        x = 100 * sp.relative_depth[squeeze]
         th = np.degrees(sp.theta) if degrees else sp.theta
+        th, modes = th[squeeze], sp.modes[squeeze]
         for c in range(len(sp.nodes)):
-            y, md = th[:, c], sp.modes[:, c]
+            y, md = th[:, c], modes[:, c]
             seg = np.stack([np.stack([x[:-1], y[:-1]], 1), np.stack([x[1:], y[1:]], 1)], 1)
             ok = np.isfinite(seg).all(axis=(1, 2))
             sl = md[1:] >= SLIP_POS
@@ -321,7 +324,7 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
             c = np.flatnonzero(sp.nodes == e["node"])
             if not c.size:
                 continue
-            k = int(np.argmin(np.abs(sp.depth - e["depth"])))
+            k = int(np.argmin(np.abs(sp.depth[squeeze] - e["depth"])))
             mk, col = EVENT_MARKERS[e["kind"]]
             ax.plot(100 * e["relative_depth"], th[k, c[0]], mk, color=col, ms=6, mec="k", mew=0.5)
         ax.autoscale_view()
@@ -334,17 +337,21 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
                    Line2D([], [], ls="", marker="v", color=EVENT_MARKERS["D"][1], mec="k")],
                   ["sticking", "sliding", "event C (stick→slip)", "event D (slip→stick)"],
                   fontsize=8, loc="best")
-    fig.suptitle("Sliding profile: polar angle about the fingertip centre")
+    pushed = "" if squeeze.all() else f" (the squeeze; the push's {int((~squeeze).sum())} rows are not drawn)"
+    fig.suptitle("Sliding profile: polar angle about the fingertip centre" + pushed)
     return fig
 
 
 def plot_events(res) -> Figure:
     """Timeline of the squeeze's contact events: depth on x, mesh node on y, one panel per
-    finger and one marker per kind (A ●, B ×, C ▲, D ▼)."""
+    finger and one marker per kind (A ●, B ×, C ▲, D ▼); an adversary's push events, at the
+    final depth, are counted in the title (``result.events.rows()`` lists them)."""
     res = views.trimmed(res)
     fig = Figure(figsize=(9, 6), dpi=DPI, layout="constrained")
     axs = fig.subplots(2, 1, sharex=True)
-    ev = [e for e in views.event_table(res) if e["phase"] == "squeeze"]      # (depth is the squeeze's)
+    table = views.event_table(res)
+    ev = [e for e in table if e["phase"] == "squeeze"]      # (depth is the squeeze's)
+    pushed = len(table) - len(ev)
     for f, ax in zip((1, 0), axs):          # finger 1 (top of the object) on top
         for kind, (mk, col) in EVENT_MARKERS.items():
             sel = [e for e in ev if e["kind"] == kind and e["finger"] == f]
@@ -363,7 +370,8 @@ def plot_events(res) -> Figure:
         axs[1].set_xlim(0, last * 1.02)
     seq = "".join(e["kind"] for e in ev)
     counts = ", ".join(f"{k}: {seq.count(k)}" for k in EVENT_LETTERS)
-    fig.suptitle(f"Contact events ({len(ev)} in all; {counts})")
+    push = f"\nand {pushed} in the adversary's push (result.events.rows(), summary.json)" if pushed else ""
+    fig.suptitle(f"Contact events of the squeeze ({len(ev)} in all; {counts}){push}")
     return fig
 
 

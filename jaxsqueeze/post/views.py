@@ -471,7 +471,9 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     relative_depth, rows, n_events, events (see :func:`event_table`), event_sequence (letters),
     total_force [N] per finger at the final depth ({"finger0": [fx, fy], "finger1": ...};
     "finger2" is an adversary's pusher), contact_regions per finger at the final depth (see
-    :func:`contact_regions`; per finger also n_stick, n_slip), grip nodes, with an adversary
+    :func:`contact_regions`; per finger also n_stick, n_slip), grip nodes (and, for a mesh
+    whose unused points were dropped, grip_nodes_source: their numbers in the mesh file or the
+    points given, ``mesh.source``), with an adversary
     squeeze_status and push [m] (the last push displacement), scene parameters (a band's nu is
     None and its method "band"; a placed scene's placement s [m] and angle [rad]), and
     ``timings`` [s] if given.
@@ -504,6 +506,9 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
             n_slip=sum(g["n_slip"] for g in regions[f])) for f in range(len(regions))},
     )
     out["grip_nodes"] = [int(v) for v in np.asarray(res.grip)]      # where the fingers first touched
+    source = getattr(getattr(scene, "mesh", None), "source", None)
+    if source is not None:                    # a mesh whose unused points were dropped: the file's numbers
+        out["grip_nodes_source"] = [int(np.asarray(source)[v]) for v in out["grip_nodes"]]
     if np.shape(res.centres)[-2] > 2:                                 # an adversary pushed (or tried to)
         out["squeeze_status"] = Status(int(res.squeeze_status)).name
         out["push"] = float(np.asarray(res.push)[-1])

@@ -447,7 +447,7 @@ def test_slip_margin_takes_the_cones_of_the_scene_friction_model(square):
             assert got == pytest.approx(-0.01 * np.log(2), abs=1e-9)
 
 
-def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
+def test_symmetric_push_is_resisted_equally_by_both_fingers(square, tmp_path):
     """An adversary pushing the mirror-symmetric squeezed square at mid-height of a free side
     (on the node there), toward its centre: both grasping fingers resist equally, and their
     shares add up to the pusher's work. The push is continuous across that node: 1e-9 m to
@@ -467,6 +467,22 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square):
     for ds in (-1e-9, 1e-9):
         near = np.asarray(Q.finger_work(jsq.squeeze(square.replace(adversary=plan.Adversary(s=s3 + ds, push=0.003)))))
         np.testing.assert_allclose(near, w, rtol=1e-6)
+    # the push in the pictures and the export: the event plot said "0 in all" beside the push's
+    # events, the sliding profile drew the push rows (all at the final depth) as vertical lines,
+    # and the export had no push field
+    import matplotlib
+    matplotlib.use("Agg")
+    import meshio
+    from jaxsqueeze.post import export, plots, views
+    pushed = sum(e["phase"] == "push" for e in views.event_table(res))
+    assert pushed >= 1 and f"and {pushed} in the adversary's push" in plots.plot_events(res)._suptitle.get_text()
+    sq = np.asarray(res.push) == 0
+    fig = plots.plot_sliding_profile(res)
+    drawn = sum(len(c.get_segments()) for ax in fig.axes for c in ax.collections)
+    on = [np.isfinite(views.sliding_profile(res, f).theta[sq]) for f in (0, 1)]
+    assert drawn == sum(int(np.sum(o[1:] & o[:-1])) for o in on) > 0      # the squeeze rows' segments only
+    vtu = meshio.read(export.write_final_vtu(tmp_path / "push.vtu", res, sc))
+    np.testing.assert_allclose(vtu.point_data["push"], 0.003, rtol=1e-12)
     F = np.asarray(res.finger_forces)[-1]
     np.testing.assert_allclose(F.sum(0), 0, atol=1e-7 * np.abs(F).max())     # three-finger balance
     assert float(Q.failure_push(res)) == pytest.approx(0.003)
