@@ -292,6 +292,9 @@ def grasp_stability(res, obj, axis: str = "surface", friction: float | None = No
     of its final ``toward`` rotation. See :func:`cone_axes` for the arguments.
     """
     res = views.trimmed(res)
+    if isinstance(tol, (bool, np.bool_)) or not isinstance(tol, (int, float, np.integer, np.floating)) \
+            or not (np.isfinite(tol) and tol >= 0):          # (tol = -1 labelled any grasp "stabilizing")
+        raise ValueError(f"tol={tol!r}: expected a finite angle >= 0 [rad]")
     c = cone_axes(res, obj, axis=axis, friction=friction)
     if friction is None and _unpack(obj)[3] is None:
         raise ValueError("grasp_stability needs the friction coefficient: pass the Scene or friction=")

@@ -132,6 +132,11 @@ def check_object(res, obj, what: str = "mesh", takes=("scene", "mesh", "band")):
     return obj
 
 
+def _check_finger(finger) -> None:
+    if isinstance(finger, (bool, np.bool_)) or finger not in (0, 1):      # (True == 1 took finger 1)
+        raise ValueError(f"finger must be 0 (the still finger) or 1 (the squeezing finger); got {finger!r}")
+
+
 def row_index(res, row: int) -> int:
     """Non-negative index of ``row`` (negative counts from the end) among the valid rows."""
     res = trimmed(res)
@@ -291,8 +296,7 @@ def force_profile(res, row: int = -1, finger: int = 0, mesh=None) -> ForceProfil
     res = trimmed(res)
     mesh = None if mesh is None else check_object(res, mesh)
     r = row_index(res, row)
-    if finger not in (0, 1):
-        raise ValueError(f"finger must be 0 (the still finger) or 1 (the squeezing finger); got {finger!r}")
+    _check_finger(finger)
     modes, fg = np.asarray(res.modes[r]), np.asarray(res.finger[r])
     theta = np.asarray(res.theta[r], float)
     F = np.asarray(res.forces[r], float)
@@ -381,8 +385,7 @@ class SlidingProfile(NamedTuple):
 def sliding_profile(res, finger: int = 0) -> SlidingProfile:
     """Polar angle of every contact node of ``finger`` (0 or 1) against depth (Fig. 6)."""
     res = trimmed(res)
-    if finger not in (0, 1):
-        raise ValueError(f"finger must be 0 (the still finger) or 1 (the squeezing finger); got {finger!r}")
+    _check_finger(finger)
     modes, fg = np.asarray(res.modes), np.asarray(res.finger)
     theta = np.asarray(res.theta, float)
     on = (modes > FREE) & (fg == finger)

@@ -269,3 +269,7 @@ def test_post_functions_name_a_wrong_kind_of_argument(offset, tmp_path):
     with pytest.raises(ValueError, match="expected a file name"):
         export.write_paraview(tmp_path, res, scene, name=" ")
     assert len(plots.plot_force_profile(res, rows=-1).axes[0].lines) >= 1
+    for call in (lambda: views.sliding_profile(res, True), lambda: views.force_profile(res, finger=True),
+                 lambda: cones.grasp_stability(res, scene, tol=-1.0), lambda: cones.grasp_stability(res, scene, tol="a")):
+        with pytest.raises(ValueError, match="finger must be 0|tol="):
+            call()
