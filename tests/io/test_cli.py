@@ -279,11 +279,10 @@ def test_grip_nodes_of_a_mesh_file_with_unused_nodes_are_refused(tmp_path):
     assert loaded.scene.grip == (a, b) and not any("no triangle" in w for w in loaded.warnings)   # no numbers to shift
     # the outputs number nodes as the mesh does; the file's numbers travel with them (a ParaView
     # user comparing point ids with the file landed on other points)
-    from jaxsqueeze.post import export
-    res = jsq.squeeze(loaded.scene)
-    vtu = meshio.read(export.write_final_vtu(tmp_path / "final.vtu", res, loaded.scene))
+    assert cli.main(["run", str(tmp_path / "points.toml"), "--out", str(tmp_path / "o"), "--no-plots", "-q"]) == 0
+    vtu = meshio.read(tmp_path / "o" / "final.vtu")
     np.testing.assert_array_equal(vtu.point_data["source_node"], read.source)
-    assert views.summary(res, loaded.scene)["grip_nodes_source"] == [a + 1, b + 1]
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["grip_nodes_source"] == [a + 1, b + 1]
     np.testing.assert_array_equal(vtu.point_data["push"], 0.0)
     # a reader's own numpy warning (meshio's STL format sniffing: "overflow encountered in scalar
     # multiply") was printed as the scene's "warning: object.mesh_file: ..."
