@@ -474,10 +474,14 @@ def read_mesh(path) -> Mesh:
         raise ValueError(f"mesh file {path} is empty (0 bytes)")
     import contextlib
     import io
+    import warnings
 
     noise = io.StringIO()         # meshio prints its own "Error: ..." before sys.exit; ours says it
     try:
-        with contextlib.redirect_stderr(noise), contextlib.redirect_stdout(noise):
+        with contextlib.redirect_stderr(noise), contextlib.redirect_stdout(noise), warnings.catch_warnings():
+            # meshio's STL reader sniffs for the binary format with a multiplication that
+            # overflows on ASCII files: a numpy RuntimeWarning about its own guess, not the mesh
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"meshio(\.|$)")
             m = meshio.read(path)
     except (KeyboardInterrupt, MemoryError):
         raise

@@ -99,7 +99,7 @@ def check_object(res, obj, what: str = "mesh", takes=("scene", "mesh", "band")):
         names = " or ".join({"scene": "the jsq.Scene", "mesh": "its jsq.Mesh", "band": "its Band",
                              "operator": "its compliance operator (scene.operator())"}[k] for k in takes)
         raise TypeError(f"expected the {what} the result was computed for ({names}), got {type(obj).__name__}")
-    if hasattr(obj, "fingers") and hasattr(obj, "depth"):            # a Scene
+    if isinstance(obj, kinds["scene"]):
         from ..simulation.status import Status
         r, radius = float(res.radius), float(obj.fingers.radius)
         if not np.isclose(r, radius, rtol=1e-6, atol=0):

@@ -412,6 +412,19 @@ def test_write_mesh_refuses_a_folder_or_a_suffix_of_no_format(tmp_path):
     assert meshio.read(tmp_path / "m.xyz", file_format="vtu").points.shape == (m.n, 3)
 
 
+@pytest.mark.parametrize("binary", [False, True])
+def test_read_stl_says_nothing_of_meshio_format_sniffing(tmp_path, binary):
+    """meshio's STL reader guesses ASCII or binary with a product that overflows on some files:
+    numpy's "overflow encountered in scalar multiply" reached the user though the mesh read right."""
+    pts, tri = grid(2, 2)
+    path = tmp_path / "g.stl"
+    meshio.write(path, meshio.Mesh(np.column_stack([pts, np.zeros(len(pts))]), [("triangle", tri)]), binary=binary)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = read_mesh(path)
+    assert m.n == 9 and len(m.triangles) == 8
+
+
 def test_read_gmsh22_written_by_meshio(tmp_path):
     pts, tri = grid(2, 2)
     path = tmp_path / "g.msh"
