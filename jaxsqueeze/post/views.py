@@ -63,14 +63,21 @@ def output_path(path, what: str = "output folder") -> str:
 
 
 def make_folder(path, what: str = "output folder") -> str:
-    """:func:`output_path` of a folder, created if missing (ValueError when it cannot be)."""
+    """:func:`output_path` of a folder, created if missing; ValueError when it cannot be, or
+    when no file can be written in it (the writers failed inside PIL, h5py or meshio)."""
     import os
+    import tempfile
 
     path = output_path(path, what)
     try:
         os.makedirs(path, exist_ok=True)
     except OSError as e:
         raise ValueError(f"{what} {path!r} cannot be created ({e.strerror}); choose a writable folder") from None
+    try:
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as e:
+        raise ValueError(f"{what} {path!r} takes no files ({e.strerror}); choose a writable folder") from None
     return path
 
 

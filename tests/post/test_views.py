@@ -269,6 +269,10 @@ def test_post_functions_name_a_wrong_kind_of_argument(offset, tmp_path):
     with pytest.raises(ValueError, match="expected a file name"):
         export.write_paraview(tmp_path, res, scene, name=" ")
     assert len(plots.plot_force_profile(res, rows=-1).axes[0].lines) >= 1
+    if os.path.isdir("/proc"):       # a folder that exists and takes no files, even for root
+        for call in (lambda: plots.save_all(res, scene, "/proc"), lambda: export.write_paraview("/proc", res, scene)):
+            with pytest.raises(ValueError, match="output folder '/proc' takes no files"):
+                call()
     for call in (lambda: views.sliding_profile(res, True), lambda: views.force_profile(res, finger=True),
                  lambda: cones.grasp_stability(res, scene, tol=-1.0), lambda: cones.grasp_stability(res, scene, tol="a")):
         with pytest.raises(ValueError, match="finger must be 0|tol="):
