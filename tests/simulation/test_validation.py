@@ -489,5 +489,16 @@ def test_a_placement_turned_past_a_right_angle_does_not_grip_through_the_object(
     sc = sc.replace(grip=None, placement=jsq.Placement(s=(0.0, P / 2)))
     res = {a: jsq.squeeze(sc.replace(placement=jsq.Placement(s=(0.0, P / 2), angle=a))) for a in (0.3, np.pi / 2, np.pi)}
     assert res[0.3].status == jsq.Status.SUCCESS
-    assert res[np.pi / 2].status == jsq.Status.LOST_CONTACT
+    lost = res[np.pi / 2]
+    assert lost.status == jsq.Status.LOST_CONTACT
+    # its last row has no contact to fix the rigid motion (a singular solve: NaN displacements,
+    # a NaN squeeze_work and NaN derivatives): the object is let go, with no forces and so no
+    # deformation, moved rigidly as in the row before
+    for name in ("forces", "boundary_displacement", "rigid", "g", "displacement"):
+        assert np.all(np.isfinite(np.asarray(getattr(lost, name)))), name
+    from jaxsqueeze.mechanics.operator import rigid_modes
+    P, g = np.asarray(sc.mesh.points), np.asarray(lost.rigid[-2])
+    np.testing.assert_allclose(lost.rigid[-1], g, rtol=0, atol=0)
+    np.testing.assert_allclose(lost.displacement, (rigid_modes(P, xp=np) @ g).reshape(-1, 2), rtol=0, atol=1e-15)
+    assert not np.any(np.asarray(lost.forces[-1])) and float(jsq.quality.squeeze_work(lost)) == 0.0
     assert res[np.pi].status == jsq.Status.INFEASIBLE_GRIP and float(res[np.pi].margin) == -np.pi
