@@ -695,7 +695,7 @@ def let_go(model: Model, st: State) -> State:
     u_k = jnp.where(bad, (model.op.N @ g_k).reshape(u[k].shape), u[k])
     F_k = jnp.where(bad, jnp.zeros_like(F[k]), F[k])
     hist = (depth, mode, finger, theta, F.at[k].set(F_k), u.at[k].set(u_k), C, alpha, g.at[k].set(g_k), push)
-    return _with(st, hist=hist, F=jnp.where(bad, F_k, st.F), u=jnp.where(bad, u_k, st.u), g=jnp.where(bad, g_k, st.g))
+    return _with(st, hist=hist, F=F_k, u=u_k, g=g_k)       # (the state is its last recorded row)
 
 
 def simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
