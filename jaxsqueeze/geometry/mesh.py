@@ -100,9 +100,10 @@ class Mesh(ByContent):
         clockwise mesh is flipped to counterclockwise; points are translated so the node
         centroid is at the origin (``offset`` keeps it). Boundary loops are chained from the
         edges used by one triangle: outer loop (largest enclosed area) first, then holes by
-        decreasing enclosed area; each loop starts at the node seen from the loop's node
-        centroid in the direction closest to +x (ties: the smaller angle, then the smaller
-        index).
+        decreasing enclosed area (equal ones by the place they start); each loop starts at
+        the node seen from the loop's node centroid in the direction closest to +x (ties: the
+        one below the axis, then the farthest from the centroid). Node numbering changes
+        neither order nor start.
 
         Raises:
             ValueError: on bad shapes, non-finite coordinates, out-of-range indices,
@@ -367,9 +368,11 @@ def _chain_loops(pts, bnext):
             node = bnext[node]
         left.difference_update(loop)
         loops.append(np.array(loop, dtype=np.int64))
-    areas = np.array([_loop_area(pts[lp]) for lp in loops])
-    order = np.lexsort((np.array([lp.min() for lp in loops]), -np.abs(areas)))
-    return [_loop_start(pts, loops[i]) for i in order]
+    loops = [_loop_start(pts, lp) for lp in loops]
+    area = np.abs([_loop_area(pts[lp]) for lp in loops])
+    start = np.round(pts[[lp[0] for lp in loops]] / np.abs(pts).max(), 9)    # equal holes: by place
+    order = np.lexsort((start[:, 1], start[:, 0], np.round(-area / area.max(), 9)))
+    return [loops[i] for i in order]
 
 
 def _loop_area(p):
@@ -379,10 +382,16 @@ def _loop_area(p):
 
 
 def _loop_start(pts, loop):
-    """Roll ``loop`` to start at the node in direction closest to +x from its node centroid."""
+    """Roll ``loop`` to start at the node in direction closest to +x from its node centroid
+    (below the +x axis first, then the farthest from the centroid: a non-convex loop can meet
+    the ray twice). Every key is geometry rounded past the centroid's summation round-off, so
+    the start, the origin of :class:`~jaxsqueeze.Placement` arc lengths, does not depend on how
+    the nodes are numbered."""
     d = pts[loop] - pts[loop].mean(axis=0)
     ang = np.arctan2(d[:, 1], d[:, 0])
-    first = np.lexsort((loop, ang, np.round(np.abs(ang), 9)))[0]
+    r = np.hypot(d[:, 0], d[:, 1])
+    keys = (np.round(-r / r.max(), 9), np.round(ang, 9), np.round(np.abs(ang), 9))
+    first = np.lexsort(keys)[0]
     return np.roll(loop, -first)
 
 

@@ -496,8 +496,10 @@ def snap(obj, xy) -> Snap:
     else:
         pts, nodes, loops = obj.points + obj.offset, np.arange(obj.m), (obj.m,)
     dist = np.linalg.norm(pts - xy, axis=1)
-    k = np.argsort(dist, kind="stable")[:2]       # (argmin's choice among equals: the first)
-    tie = len(k) == 2 and dist[k[1]] - dist[k[0]] <= 1e-6 * dist[k[1]]
+    # equally near within round-off (the offset's rounding depends on the node numbering): the
+    # first in boundary order, which is geometric (Mesh.boundary), not the last bit's choice
+    k = np.flatnonzero(dist <= dist.min() * (1 + 1e-6))[:2]
+    tie = len(k) == 2
     return Snap(int(nodes[k[0]]), pts[k[0]].tolist(), float(dist[k[0]]), _boundary_edge_at(pts, loops, int(k[0])),
                 int(nodes[k[1]]) if tie else None)
 

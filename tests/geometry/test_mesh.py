@@ -554,3 +554,55 @@ def test_dropping_an_unused_point_that_shifts_node_numbers_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert Mesh.from_arrays(pts[1:], SQUARE_TRI).source.tolist() == [0, 1, 2, 3]
+
+
+def c_shape(h=0.01):
+    """A mirror-symmetric "C" (a 10 x 10 block with a 6 x 4 notch opening to the left): the +x
+    ray from its boundary's node centroid meets two boundary nodes, (0.06, 0) and (0.1, 0)."""
+    nid, pts, tri = {}, [], []
+
+    def node(i, j):
+        if (i, j) not in nid:
+            nid[(i, j)] = len(pts)
+            pts.append((i * h, j * h))
+        return nid[(i, j)]
+    for i in range(10):
+        for j in range(-5, 5):
+            if i < 6 and -2 <= j < 2:
+                continue
+            a, b, c, d = node(i, j), node(i + 1, j), node(i + 1, j + 1), node(i, j + 1)
+            tri += [(a, b, c), (a, c, d)] if (i + j) % 2 else [(a, b, d), (b, c, d)]
+    return np.array(pts), np.array(tri)
+
+
+@pytest.mark.parametrize("make", [c_shape, lambda: grid(4, 3, 1.0, 0.5)], ids=["C", "grid"])
+def test_boundary_order_does_not_depend_on_node_numbering(make):
+    """The boundary's start (the origin of Placement arc lengths) and its loop order are
+    geometry: renumbering the nodes at random moves neither. On the "C", whose +x ray meets two
+    nodes, the start used to be picked by the sign of a 1e-17 centroid residue and then by node
+    index (16 of 40 numberings started at the inner node). The start is the outer node."""
+    P, T = make()
+    first = Mesh.from_arrays(P, T)
+    start = (first.points + first.offset)[first.boundary]
+    if make is c_shape:
+        np.testing.assert_allclose(start[0], [0.1, 0.0], atol=1e-12)
+    for seed in range(12):
+        p = np.random.default_rng(seed).permutation(len(P))          # new node k = old node p[k]
+        m = Mesh.from_arrays(P[p], np.argsort(p)[T])
+        np.testing.assert_allclose((m.points + m.offset)[m.boundary], start, atol=1e-12)
+
+
+def test_equal_holes_are_ordered_by_place_not_by_node_number():
+    """Two equal square holes: which comes first in ``boundary`` is decided by where they are,
+    whatever the node numbering."""
+    P, T = grid(6, 3, 6.0, 3.0)
+    centre = P[T].mean(axis=1)
+    keep = ~(((np.abs(centre[:, 0] - 1.5) < 0.5) | (np.abs(centre[:, 0] - 4.5) < 0.5)) & (np.abs(centre[:, 1] - 1.5) < 0.5))
+    T = T[keep]
+    first = Mesh.from_arrays(P, T)
+    assert first.loops == (18, 4, 4)
+    start = (first.points + first.offset)[first.boundary]
+    for seed in range(8):
+        p = np.random.default_rng(seed).permutation(len(P))
+        m = Mesh.from_arrays(P[p], np.argsort(p)[T])
+        np.testing.assert_allclose((m.points + m.offset)[m.boundary], start, atol=1e-12)
