@@ -233,6 +233,8 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     """Convert the engine's final state (scaled) into a :class:`SqueezeResult` (SI), padded
     with the last valid row; the full displacement field is left to the caller (None)."""
     L, Fs = op.length, op.force_scale
+    # refused under tracing: no force, whatever a NaN modulus or thickness made of the scale
+    Fs = jnp.where(st.invalid >= 0, 0.0, Fs)
     depth, mode, finger, theta, F, u, C, alpha, g, push = st.hist
     k = jnp.minimum(st.count, depth.shape[0])
     rows = jnp.arange(depth.shape[0])

@@ -220,13 +220,17 @@ def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
     the field (depth), records one unloaded row at depth 0 (not the invalid depth echoed back),
     and the good lane equals the eager squeeze."""
     from jaxsqueeze.simulation import validate
-    d0 = float(slanted.depth)
-    out = jax.vmap(lambda d: jsq.squeeze(slanted.replace(depth=d)))(jnp.array([d0, 0.0, -0.004]))
-    assert [jsq.Status(int(v)) for v in out.status] == [jsq.Status.SUCCESS] + [jsq.Status.INVALID_INPUT] * 2
-    assert list(np.asarray(out.invalid)[1:]) == [validate.FIELDS.index("depth")] * 2
-    np.testing.assert_array_equal(np.asarray(out.final_depth)[1:], 0.0)
-    np.testing.assert_array_equal(np.asarray(out.count)[1:], 1)
-    assert np.all(np.asarray(out.forces)[1:] == 0)
+    d0, E0 = float(slanted.depth), float(slanted.material.E)
+    mat = slanted.material
+    run = jax.vmap(lambda d, E: jsq.squeeze(slanted.replace(depth=d, material=jsq.Material(E, mat.nu, mat.thickness))))
+    out4 = run(jnp.array([d0, 0.0, -0.004, d0]), jnp.array([E0, E0, E0, np.nan]))
+    assert [jsq.Status(int(v)) for v in out4.status] == [jsq.Status.SUCCESS] + [jsq.Status.INVALID_INPUT] * 3
+    assert list(np.asarray(out4.invalid)[1:]) == [validate.FIELDS.index("depth")] * 2 + [validate.FIELDS.index("material.E")]
+    np.testing.assert_array_equal(np.asarray(out4.final_depth)[1:], 0.0)
+    np.testing.assert_array_equal(np.asarray(out4.count)[1:], 1)
+    # zero forces, also where the refused number is in the force scale E h L (they were NaN)
+    assert np.all(np.asarray(out4.forces)[1:] == 0) and np.all(np.asarray(out4.push_work)[1:] == 0)
+    out = jax.tree.map(lambda a: a[:3], out4)
     eager = jsq.squeeze(slanted)
     np.testing.assert_allclose(np.asarray(out.final_forces)[0], eager.final_forces, rtol=1e-10,
                                atol=1e-12 * np.abs(eager.final_forces).max())
@@ -504,6 +508,12 @@ def test_jacfwd_in_every_number_matches_central_differences(slanted):
     bad = p0.copy()
     bad[5] = 1.0
     np.testing.assert_array_equal(jax.jacfwd(force)(jnp.asarray(bad)), np.zeros(7))
+    # also where the refused number is the force scale's own (E h L): a NaN modulus or
+    # thickness gave NaN forces and derivatives
+    for k in (0, 2):
+        bad = p0.copy()
+        bad[k] = np.nan
+        np.testing.assert_array_equal(jax.jacfwd(force)(jnp.asarray(bad)), np.zeros(7), err_msg=names[k])
 
 
 def test_reverse_mode_is_refused_with_the_way_to_a_gradient(slanted):
