@@ -34,3 +34,12 @@ def positive(x, what: str, unit: str = "") -> float:
     if not (np.isfinite(v) and v > 0):
         raise ValueError(f"{what} must be a positive, finite number{where}; got {v!r}")
     return v
+
+
+def gib(nbytes) -> str:
+    """A byte count in GiB for a message ("1.5 GiB"); a Python int too large for a float (a
+    400-digit count from a scene file) reads as "inf GiB" rather than an OverflowError."""
+    try:
+        return f"{float(nbytes) / 1024 ** 3:.3g} GiB"
+    except OverflowError:
+        return "inf GiB"

@@ -27,16 +27,14 @@ from typing import Callable
 
 import numpy as np
 
-from ..numbers import real_array
+from ..numbers import positive, real_array
 
 Curve = Callable[[np.ndarray], np.ndarray]
 
 
 def circle(radius: float = 0.04) -> Curve:
     """Circle of ``radius`` [m] centred at the origin, counterclockwise, starting on +x."""
-    r = float(radius)
-    if not r > 0:
-        raise ValueError(f"circle radius must be > 0 m, got {radius!r}")
+    r = positive(radius, "the circle radius", "m")
 
     def gamma(p):
         a = 2.0 * np.pi * np.asarray(p, dtype=np.float64)
@@ -59,8 +57,7 @@ def heart(size: float = 0.08, smoothing: float = 0.25) -> Curve:
     ``smoothing`` (> 0, dimensionless) damps harmonic k by ``exp(-(smoothing k)^2)``; larger
     values give rounder (less heart-like) outlines. ``p = 0`` is the top dimple.
     """
-    if not size > 0:
-        raise ValueError(f"heart size must be > 0 m, got {size!r}")
+    size, smoothing = positive(size, "the heart size", "m"), positive(smoothing, "the heart smoothing")
     if not 0.1 <= smoothing <= 0.4:
         raise ValueError(f"heart smoothing must lie in [0.1, 0.4] (bounded curvature, heart-like), got {smoothing!r}")
     dense = _heart_raw(np.arange(4096) / 4096, smoothing)
@@ -80,9 +77,8 @@ def leaf(length: float = 0.08, width: float = 0.04, tip: float = 0.002) -> Curve
     ``(width/2)^2 / (length/2)`` (the radius of the ellipse with the same axes).
     Counterclockwise, ``p = 0`` at the +x tip.
     """
-    a, b, r = 0.5 * float(length), 0.5 * float(width), float(tip)
-    if not (a > 0 and b > 0 and r > 0):
-        raise ValueError(f"leaf length, width and tip must be > 0 m, got {length!r}, {width!r}, {tip!r}")
+    a, b = 0.5 * positive(length, "the leaf length", "m"), 0.5 * positive(width, "the leaf width", "m")
+    r = positive(tip, "the leaf tip radius", "m")
     q = r * a / b**2
     if q >= 1.0:
         raise ValueError(f"leaf tip radius {tip!r} m must be below (width/2)^2/(length/2) = {b * b / a:g} m")

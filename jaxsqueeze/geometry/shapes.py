@@ -260,12 +260,13 @@ def estimate_elements(area, perimeter, h) -> float:
     with the sizing ``h`` of :func:`_sizing`: the area over the target triangle area at
     ``max_edge``, plus the refined zones at ``min_edge`` (each at most the whole area), plus
     the boundary nodes."""
-    tri_area = lambda e: AREA_FACTOR * _SQRT3_4 * e ** 2 / 1.45  # noqa: E731  (1.45: fitted to Triangle's counts)
-    n = area / tri_area(h.max_edge) + perimeter / h.min_edge
-    if h.refined:
-        reach = h.radius + (h.max_edge - h.min_edge) / GRADING
-        zone = min(area, h.count * np.pi * reach ** 2)
-        n += zone / tri_area(h.min_edge)
+    tri_area = lambda e: AREA_FACTOR * _SQRT3_4 * np.float64(e) ** 2 / 1.45  # noqa: E731  (1.45: fitted to Triangle's counts)
+    with np.errstate(over="ignore"):      # an edge beyond 1e154 m: an infinite triangle, none counted
+        n = area / tri_area(h.max_edge) + perimeter / h.min_edge
+        if h.refined:
+            reach = h.radius + (h.max_edge - h.min_edge) / GRADING
+            zone = min(area, h.count * np.pi * np.float64(reach) ** 2)
+            n += zone / tri_area(h.min_edge)
     return float(n)
 
 
@@ -440,11 +441,11 @@ def _mesh_rings(rings, hole_points, h) -> Mesh:
     seg = np.concatenate([s + np.stack([np.arange(len(r)), (np.arange(len(r)) + 1) % len(r)], axis=1)
                           for s, r in zip(starts, rings)])
     shift = 0.5 * (verts.min(axis=0) + verts.max(axis=0))
-    scale = h.max_edge
+    scale = min(h.max_edge, float(np.ptp(verts, axis=0).max()))     # (a max_edge beyond the object: its size)
     data = dict(vertices=(verts - shift) / scale, segments=seg)
     if len(hole_points):
         data["holes"] = (np.asarray(hole_points, dtype=np.float64).reshape(-1, 2) - shift) / scale
-    area = AREA_FACTOR * _SQRT3_4
+    area = AREA_FACTOR * _SQRT3_4 * min(h.max_edge / scale, 1e3) ** 2     # (no bound on the object either way)
     out = tr.triangulate(data, f"pq30a{area:.12f}YQ")
     for _ in range(_REFINE_PASSES if h.refined else 0):
         p = out["vertices"][out["triangles"]]

@@ -83,7 +83,7 @@ from scipy.interpolate import CubicSpline
 from ..geometry.boundary import crossing
 from ..geometry.curves import arclength_params
 from ..geometry.mesh import ByContent
-from ..numbers import positive, real_array
+from ..numbers import gib, positive, real_array
 from ..tracing import as_array, caller_level
 from .operator import Compliance, FieldMap, rigid_modes
 
@@ -139,10 +139,42 @@ _FEW = ("a ring of 4 nodes is about 800 times too stiff and one of 8 about 35 % 
 COINCIDENT = 1e-6
 
 
+#: the band sizes [m] the library takes: within them the stiffness (E w^3 / L^3 and the like)
+#: and the arc lengths stay far from float64's overflow and underflow
+EXTENT = (1e-9, 1e9)
+
+
+def _check_extent(xy: np.ndarray) -> None:
+    size = float(np.max(np.ptp(xy, axis=0)))
+    if not EXTENT[0] <= size <= EXTENT[1]:
+        raise ValueError(f"the band's size, {size:.3g} m across, is outside the {EXTENT[0]:g} .. {EXTENT[1]:g} m "
+                         "that the band model resolves: lengths are in metres (a length in millimetres is 1000 "
+                         "times too large)")
+
+
+def _touching(xy: np.ndarray, tol: float, chunk: int = 256):
+    """The first point of a closed polyline xy (m, 2) within ``tol`` [m] of a segment that does
+    not end at it, as (point, segment's first point), or None: a curve that touches itself
+    without crossing (a spike back to an earlier point). O(m^2) in chunks of ``chunk`` points."""
+    a, b = xy, np.roll(xy, -1, axis=0)
+    e = b - a
+    m, seg = len(xy), np.arange(len(xy))
+    for lo in range(0, m, chunk):
+        i = np.arange(lo, min(lo + chunk, m))[:, None]
+        p = xy[i]                                                      # (c, 1, 2)
+        t = np.clip(np.sum((p - a) * e, axis=-1) / np.sum(e * e, axis=-1), 0.0, 1.0)
+        dist = np.linalg.norm(p - (a + t[..., None] * e), axis=-1)     # (c, m)
+        hit = (dist <= tol) & (seg != i) & ((seg + 1) % m != i)
+        if hit.any():
+            r, c = np.argwhere(hit)[0]
+            return int(lo + r), int(c)
+    return None
+
+
 def _check_size(m: int) -> None:
     """Refuse a band of more than :data:`MAX_NODES` nodes before any O(m²) work."""
     if m > MAX_NODES:
-        raise ValueError(f"a band of {m:,} nodes needs dense matrices of (4m)² = {(4 * m) ** 2 * 8 / 1024 ** 3:.3g} GiB "
+        raise ValueError(f"a band of {m:,} nodes needs dense matrices of (4m)² = {gib((4 * m) ** 2 * 8)} "
                          f"each, beyond the limit of {MAX_NODES:,} nodes (jaxsqueeze.mechanics.band.MAX_NODES, env "
                          "JAXSQUEEZE_MAX_BAND_NODES); 128-256 nodes resolve the examples' outlines")
 
@@ -265,6 +297,7 @@ class Band(ByContent):
                 raise ValueError(f"xy (m, 2) must be finite: point {k} is {xy[k].tolist()}")
             raise ValueError(f"xy must be a finite (m, 2) array with m >= {MIN_NODES}, got shape {xy.shape}: "
                              f"{_FEW}")
+        _check_extent(xy)
         gaps = np.linalg.norm(np.roll(xy, -1, axis=0) - xy, axis=1)
         close = np.flatnonzero(gaps <= COINCIDENT * gaps.mean())
         if close.size:
@@ -272,6 +305,8 @@ class Band(ByContent):
             raise ValueError(f"band points {k} and {(k + 1) % len(xy)} coincide ({gaps[k]:.3g} m apart, mean spacing "
                              f"{gaps.mean():.3g} m; {close.size} such pair(s)): remove the repeated points")
         width, height = _length("width", width), _length("height", height)
+        offset = xy.mean(axis=0)
+        xy = xy - offset                 # (far from the origin, the area's digits would cancel)
         x, y = xy[:, 0], xy[:, 1]
         hit = crossing(xy, (len(xy),))
         if hit is not None:
@@ -282,6 +317,11 @@ class Band(ByContent):
         if area <= 1e-12 * np.sum(gaps) ** 2:
             raise ValueError("the band curve encloses no area (its points lie on a line)" if area > -1e-12 * np.sum(
                 gaps) ** 2 else "the band curve must run counterclockwise (positive signed area): reverse the points")
+        touch = _touching(xy, COINCIDENT * gaps.mean())
+        if touch is not None:
+            k, j = touch
+            raise ValueError(f"the band curve touches itself: point {k} lies on segment {[j, (j + 1) % len(xy)]} "
+                             "(point indices); a band is one simple closed curve: remove the spike or loop there")
         cs, u, period = _spline(xy)
         m = u.shape[0]
         du = np.diff(np.append(u, period))
@@ -294,8 +334,7 @@ class Band(ByContent):
         xg, wg = np.polynomial.legendre.leggauss(8)
         ue = u[:, None] + 0.5 * (xg + 1.0) * du[:, None]
         s = np.concatenate([[0.0], np.cumsum(0.5 * du * (np.linalg.norm(cs(ue, 1), axis=-1) @ wg))])
-        offset = xy.mean(axis=0)
-        return cls(points=xy - offset, offset=offset, tangents=t, normals=np.stack([t[:, 1], -t[:, 0]], axis=1),
+        return cls(points=xy, offset=offset, tangents=t, normals=np.stack([t[:, 1], -t[:, 0]], axis=1),
                    curvature=kappa, s=s[:m], perimeter=float(s[m]), width=float(width),
                    height=float(height), du=du, jac=J, qd1=cs(uq, 1), qd2=cs(uq, 2))
 
@@ -311,6 +350,9 @@ class Band(ByContent):
         if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < MIN_NODES:
             raise ValueError(f"a band needs an integer number of nodes m >= {MIN_NODES}, got {m!r}: {_FEW}")
         _check_size(m)
+        coarse = real_array(gamma(np.arange(64) / 64), "the curve's points", "m")
+        if coarse.shape == (64, 2) and np.all(np.isfinite(coarse)):
+            _check_extent(coarse)                 # (before arc lengths that would overflow)
         return cls.from_curve(np.asarray(gamma(arclength_params(gamma, m))), width, height)
 
     def to_xy(self) -> np.ndarray:
@@ -323,7 +365,9 @@ class Band(ByContent):
     def rigid_dofs(self, center=None) -> np.ndarray:
         """R (ndof, 3): DOFs of unit x and y translation [m] and unit rotation [rad] about
         ``center`` (centroid frame; default: the node centroid, the origin). Exact: the interpolated fields are rigid."""
-        c = self.points.mean(axis=0) if center is None else np.asarray(center, dtype=np.float64)
+        c = self.points.mean(axis=0) if center is None else real_array(center, "center", "m")
+        if c.shape != (2,) or not np.all(np.isfinite(c)):
+            raise ValueError(f"center must be one finite (x, y) point [m] in the band's centroid frame; got {c.tolist()}")
         r, t = self.points - c, self.tangents
         R = np.zeros((4 * self.m, 3))
         R[0::4, 0] = R[1::4, 1] = 1.0
@@ -392,6 +436,7 @@ def band_stiffness(band: Band, E: float, project: bool = True) -> np.ndarray:
     ``project=True`` (default) also removes that round-off (orthogonal projection, slope DOFs
     scaled by the mean element length), so the null space is exactly :meth:`Band.rigid_dofs`.
     """
+    E = positive(E, "Young's modulus E", "Pa")
     w, h = band.width, band.height
     m = band.m
     ke = element_stiffness(band.du, band.jac, np.roll(band.jac, -1), band.qd1, band.qd2,

@@ -36,6 +36,8 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..numbers import gib
+
 FIELDS: tuple[str, ...] = (
     "material.E",
     "material.nu",
@@ -83,6 +85,21 @@ def _r_positive(name):
         x = _get(values, name)
         return None if x is None else _finite_pos(xp, xp.asarray(x))
     return rule
+
+
+#: the largest fingertip radius, in object sizes: a flat finger. The squeeze converges as the
+#: radius grows (the grip force of a 0.1 m square at 1e4 sizes is within 2e-5 of that at 1e7);
+#: far beyond, the fingertip's squared distances overflow
+RADIUS_SHARE = 1e6
+
+
+def _r_radius(values, xp):
+    r = _get(values, "fingers.radius")
+    if r is None:
+        return None
+    r = xp.asarray(r)
+    size = _get(values, "size")
+    return _finite_pos(xp, r) & (True if size is None else r <= RADIUS_SHARE * xp.asarray(size))
 
 
 def force_limit(eps: float) -> float:
@@ -269,8 +286,9 @@ def _r_overlap(values, xp):
     ov = xp.max(ov, axis=-1) if ov.ndim >= 1 else ov
     r = _get(values, "fingers.radius")
     r = 0.0 if r is None else xp.asarray(r)
-    tol = OVERLAP_TOL * xp.where(_finite_pos(xp, r), r, 0.0)     # a bad radius is reported as such
-    return xp.isfinite(ov) & (ov <= tol)
+    tol = OVERLAP_TOL * xp.where(_finite_pos(xp, r), r, 0.0)
+    bad_r = _r_radius(values, xp)                                 # a bad radius is reported as such
+    return xp.isfinite(ov) & (ov <= tol) | (False if bad_r is None else ~bad_r)
 
 
 class Rule(NamedTuple):
@@ -288,8 +306,8 @@ RULES: tuple[Rule, ...] = (
     Rule("material.nu", _r_nu, "a Poisson's ratio with -1 < nu <= 0.5", "use e.g. nu = 0.3"),
     Rule("material.thickness", _r_positive("material.thickness"), "a finite thickness > 0 m",
          "set Material(thickness=...) in metres"),
-    Rule("fingers.radius", _r_positive("fingers.radius"), "a finite fingertip radius > 0 m",
-         "set Fingers(radius=...) in metres"),
+    Rule("fingers.radius", _r_radius, f"a finite fingertip radius > 0 m, at most {RADIUS_SHARE:g} times the "
+         "object's size (a flat finger)", "set Fingers(radius=...) in metres"),
     Rule("friction", _r_friction, "a finite Coulomb coefficient mu >= 0", "use e.g. friction = 0.5"),
     Rule("depth", _r_depth, "a finite depth > 0 m, smaller than the object's size (deeper, the squeeze would "
          "crush it) and than the distance between the grip nodes (deeper, the fingertips pass through each other)",
@@ -419,7 +437,8 @@ def fingertip_overlap(points, normals, slots, radius, xp=None):
     P, N = xp.asarray(points), xp.asarray(normals)
     s = xp.clip(xp.asarray(slots), 0, P.shape[0] - 1)
     C = P[s] + radius * N[s]                                     # (2, 2)
-    d = xp.sqrt(xp.sum((P[None, :, :] - C[:, None, :]) ** 2, axis=-1))   # (2, m)
+    D = P[None, :, :] - C[:, None, :]
+    d = xp.hypot(D[..., 0], D[..., 1])                           # (2, m), no overflow at a huge radius
     own = xp.arange(P.shape[0])[None, :] == s[:, None]
     d = xp.where(own, xp.inf, d)
     return radius - xp.min(d, axis=-1)
@@ -489,10 +508,6 @@ def check_scene(scene, eps: float | None = None) -> None:
 
 
 # ----------------------------------------------------------------------------- cost guards
-def _gib(b: float) -> str:
-    return f"{b / 1024 ** 3:.3g} GiB"
-
-
 def history_bytes(m: int, capacity: int, max_steps: int, max_events: int, dtype=np.float64) -> int:
     """Estimated memory [bytes] of the fixed-capacity history, event log and contact slots.
 
@@ -544,13 +559,13 @@ def check_costs(m: int, n: int, method: str, capacity: int, max_steps: int, max_
         value = {"max_steps": max_steps, "max_events": max_events, "capacity": capacity}
         default = {"max_steps": 400, "max_events": 256, "capacity": "None: chosen"}
         out.append(f"settings.{dom} = {value[dom]}: the history, event log and contact slots would take about "
-                   f"{_gib(hb)} (max_steps = {max_steps}, max_events = {max_events}, capacity = {capacity}; limit "
-                   f"{_gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env JAXSQUEEZE_MEMORY_LIMIT); "
+                   f"{gib(hb)} (max_steps = {max_steps}, max_events = {max_events}, capacity = {capacity}; limit "
+                   f"{gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env JAXSQUEEZE_MEMORY_LIMIT); "
                    f"lower {dom} (default {default[dom]})")
     cb = compliance_bytes(m, n, method, dtype)
     if cb > limit:
         out.append(f"the {method} compliance build of {n} nodes ({m} on the boundary) would take about "
-                   f"{_gib(cb)} (limit {_gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env "
+                   f"{gib(cb)} (limit {gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env "
                    "JAXSQUEEZE_MEMORY_LIMIT); use a coarser mesh"
                    + ("" if method == "sparse" else " or method = 'sparse'"))
     return out
@@ -686,7 +701,7 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
     return errors, warns
 
 
-__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
+__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "RADIUS_SHARE", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
            "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
            "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
            "shape_problems", "unit_problems", "deep_warning", "inverted_warning", "boundary_points", "force_limit"]

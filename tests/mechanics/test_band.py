@@ -210,6 +210,21 @@ def test_curves():
         Band.from_curve(twisted)
     with pytest.raises(ValueError):
         curves.leaf(0.08, 0.04, tip=0.03)
+    # a spike back to an earlier point touches without crossing: it was a band of a third more perimeter
+    c = curves.sample(curves.circle(0.04), 32)
+    with pytest.raises(ValueError, match=r"touches itself: point 3 lies on segment \[15, 16\]"):
+        Band.from_curve(np.vstack([c[:16], c[3:4], c[16:]]))
+    # far from the origin (the area's digits cancelled: "encloses no area"), and sizes beyond the model
+    far = Band.from_curve(c + 1e7)
+    np.testing.assert_allclose(far.perimeter, Band.from_curve(c).perimeter, rtol=1e-8)
+    np.testing.assert_allclose(far.offset, [1e7, 1e7], rtol=1e-12)
+    for size in (1e160, 1e-300):
+        with pytest.raises(ValueError, match=r"the band's size, .* m across, is outside the 1e-09 \.\. 1e\+09 m"):
+            Band.from_function(curves.circle(size), 16)
+    # the outlines' sizes are numbers in metres (text, True and inf were read or failed in numpy)
+    for make, bad in [(curves.circle, "a"), (curves.circle, True), (curves.heart, "1"), (curves.leaf, np.inf)]:
+        with pytest.raises(ValueError, match=r"must be (one|a) positive, finite number \[m\]"):
+            make(bad)
 
 
 def test_a_repeated_closing_point_is_dropped_and_coincident_points_are_named():
@@ -281,6 +296,11 @@ def test_band_compliance_modulus_and_dof_vectors_are_checked():
     for bad in ("x", float("inf"), True, [2e9], 0.0, -1.0):
         with pytest.raises(ValueError, match=r"Young's modulus E must be (one|a) positive, finite number \[Pa\]"):
             band_compliance(band, bad)
+        with pytest.raises(ValueError, match=r"Young's modulus E must be (one|a) positive, finite number \[Pa\]"):
+            band_stiffness(band, bad)                   # (E = -1 was a negative stiffness, silently)
+    for bad in ([1.0, 2.0, 3.0], [np.nan, 0.0], "x"):
+        with pytest.raises(ValueError, match=r"center must be one finite \(x, y\) point|center must be"):
+            band.rigid_dofs(center=bad)
     for bad in (np.zeros(5), np.zeros((16, 4)), np.zeros(65)):
         with pytest.raises(ValueError, match=r"band DOFs must have shape \(4m,\) = \(64,\) .* got \("):
             band.rotation(bad)

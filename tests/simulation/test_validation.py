@@ -28,7 +28,7 @@ BAD = {
     "material.E": POS + [1e160],                 # E h L = 2.5e155 N: forces overflow when squared (traced: inf, SUCCESS)
     "material.nu": [NAN, INF, -1.0, -2.0, 0.5000001],
     "material.thickness": POS,
-    "fingers.radius": POS,
+    "fingers.radius": POS + [2e5],               # 2e6 object sizes (0.1 m); 1e200 overflowed the overlap test
     "friction": [NAN, INF, -0.1],
     "depth": POS + [0.1, 0.2],                   # 0.1 / 0.2 >= the grip distance: fingertips pass through
     "settings.step": POS + [1e-300, 1e-17, 0.02],  # below the depth's round-off; above the depth
