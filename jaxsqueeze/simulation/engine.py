@@ -580,7 +580,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     """Phase CHECK: the new contact set solved at d*. Test it by hypothesis; if that changed
     it, update the slots and solve again at d*; else accept the row (and stop with STALLED
-    when the event undid itself at the depth it started from: it would repeat forever).
+    when the event undid itself at the depth it started from, within event_tol: it would repeat
+    forever).
     Returns (state, accept)."""
     mode, finger, theta, changed, unsettled, logged, kinds = _hypothesis(model, st, sol, dsol)
     again = changed & ~unsettled & (st.fault == RUNNING)      # a faulted run stops at this row
@@ -592,7 +593,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
         events, n_ev, fault = _log(model, st, logged, kinds, finger, d_star)
         return _with(st, nodes=nodes, added=added, checks=st.checks + 1, events=events, n_ev=n_ev, fault=fault)
 
-    stalled = (jnp.all(st.nodes.mode == st.before) & (d_star <= st.d)) | unsettled
+    stalled = (jnp.all(st.nodes.mode == st.before) & (d_star <= st.d + model.ev_tol)) | unsettled
     fault = jnp.where(stalled & (st.fault == RUNNING), Status.STALLED, st.fault).astype(jnp.int32)
     return lax.cond(again, retry, lambda: _with(st, fault=fault)), ~again
 

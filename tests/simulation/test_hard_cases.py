@@ -744,3 +744,29 @@ def test_asymmetric_frictionless_grip_stops_with_stalled():
     row_max = np.abs(F).reshape(len(F), -1).max(1)[:, None]
     assert np.all(ft[:-1][on[:-1]] <= (DRIFT_SHARE * row_max[:-1] * np.ones_like(ft[:-1]))[on[:-1]])
     assert np.any(ft[-1][on[-1]] > DRIFT_SHARE * row_max[-1])       # the row that stopped it
+
+
+def test_a_contact_that_undoes_itself_stalls_at_its_first_repeat_wherever_the_band_starts():
+    """A segment-contact circle band under a wide fingertip: at one depth a new contact (A) is
+    released again (B) and the set returns to where it was. The squeeze stops with STALLED at
+    the first repeat (two rounds). The stall test compared the depth of the repeat with the last row's
+    exactly, and each repeat landed 1e-16 to 3e-12 m past it, so how many A/B rounds ran
+    before STALLED (2 to 7) depended on which point the band's list started at."""
+    from jaxsqueeze.geometry import curves
+    from jaxsqueeze.mechanics.band import Band
+    m, h = 64, 5e-3
+    xy = curves.sample(curves.circle(0.04), m)
+    seen = []
+    for k in (0, 42):
+        band = Band.from_curve(np.roll(xy, -k, axis=0), width=0.5e-3, height=h)
+        grip = ((49 - k) % m, (15 - k) % m)                      # the same two points
+        D0 = np.linalg.norm(band.points[grip[0]] - band.points[grip[1]])
+        res = jsq.squeeze(jsq.Scene(mesh=band, material=jsq.Material(E=2e9, nu=0.3, thickness=h),
+                                    fingers=jsq.Fingers(radius=0.03), grip=grip, depth=0.3 * D0,
+                                    contact="segment", friction=0.26))
+        kinds = [e[2] for e in res.events.rows()]
+        # one node on each fingertip joins and lets go, then again: STALLED (it was up to 7 rounds)
+        assert res.outcome == jsq.Status.STALLED and kinds == ["A", "A", "B", "B"] * 2, kinds
+        seen.append((int(res.count), kinds, float(res.final_depth)))
+    assert seen[0][:2] == seen[1][:2]
+    assert seen[0][2] == pytest.approx(seen[1][2], rel=1e-9)
