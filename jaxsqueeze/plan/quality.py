@@ -148,34 +148,25 @@ def _slip_margin(res: SqueezeResult, friction, tau, surface=None):
     return -_softmax(-jnp.stack(per), tau)
 
 
-def _push_increments(res: SqueezeResult):
-    valid, _, push = _rows(res)
-    C = jnp.asarray(res.centres)
-    if C.shape[-2] < 3:
+def _push_work(res: SqueezeResult):
+    """(3,) [J]: the pusher's work and each grasping finger's share, summed by the engine over
+    every push increment (the trapezoid rule above), so also for results that keep only their
+    last rows (``Settings(history=False)``: a sum over the recorded rows saw one increment)."""
+    if jnp.asarray(res.centres).shape[-2] < 3:
         raise ValueError("this result has no adversary phase: give the scene an Adversary")
-    dx = C[1:, 2] - C[:-1, 2]          # (k-1, 2) pusher moves (it waits at its start in squeeze rows)
-    step = push[1:] & valid[1:]        # increments that end in a push row
-    return jnp.asarray(res.finger_forces), dx, step, push
+    return jnp.asarray(res.push_work)
 
 
 @per_result
 def adversary_work(res: SqueezeResult):
     """() work the pusher does on the object during the adversary phase [J] (module docstring)."""
-    forces, dx, step, _ = _push_increments(res)
-    f = forces[:, 2]
-    return jnp.sum(jnp.where(step, jnp.sum(0.5 * (f[1:] + f[:-1]) * dx, -1), 0.0))
+    return _push_work(res)[0]
 
 
 @per_result
 def finger_work(res: SqueezeResult):
     """(2,) work each grasping finger resists during the push [J]; they sum to :func:`adversary_work`."""
-    forces, dx, step, _ = _push_increments(res)
-    start = forces[_squeeze_row(res)]
-    out = []
-    for i in (0, 1):
-        dF = forces[:, i] - start[i]
-        out.append(-jnp.sum(jnp.where(step, jnp.sum(0.5 * (dF[1:] + dF[:-1]) * dx, -1), 0.0)))
-    return jnp.stack(out)
+    return _push_work(res)[1:]
 
 
 @per_result
