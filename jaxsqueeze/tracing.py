@@ -51,6 +51,17 @@ def reverse_mode(x) -> bool:
     return any(rev(v) for v in jax.tree.leaves(x))
 
 
+def differentiated(x) -> bool:
+    """True if any leaf of ``x`` carries a forward-mode tangent (``jax.jvp``, ``jax.jacfwd``),
+    also through ``vmap``/``jit`` tracers around it (read from the tracers' class names, as
+    :func:`reverse_mode`)."""
+    def fwd(t, depth=0) -> bool:
+        if not isinstance(t, jax.core.Tracer) or depth > 8:
+            return False
+        return type(t).__name__ == "JVPTracer" or any(fwd(getattr(t, a, None), depth + 1) for a in ("val", "primal"))
+    return any(fwd(v) for v in jax.tree.leaves(x))
+
+
 def numeric(x) -> bool:
     """True for a concrete number or array of numbers (what eager validation can check).
 

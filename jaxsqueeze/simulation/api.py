@@ -17,7 +17,7 @@ from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..tracing import as_array, is_concrete, reverse_mode
+from ..tracing import as_array, differentiated, is_concrete, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
 from .scene import Scene, stiffness_of
@@ -107,6 +107,8 @@ def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
     values["size"] = op.length
     if not isinstance(scene.mesh, Mesh):
         values.pop("material.nu")                      # a band has no ν
+    elif op.nu is not None:
+        values["op_nu"] = op.nu                        # a given op fixes ν (traced: checked here)
     if scene.placement is None:
         xp = np if is_concrete((grasp.grip, grasp.radius, op.points)) else jnp    # eager: no tiny device ops
         P, grip = xp.asarray(op.points) * xp.asarray(op.length), xp.asarray(grasp.grip)
@@ -301,6 +303,10 @@ def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
     else:
         if is_concrete((scene.material.nu, op)):
             check_operator(scene, op)
+        elif op.nu is not None and isinstance(scene.mesh, Mesh) and differentiated(scene.material.nu):
+            raise TypeError("the scene's nu is differentiated (jax.jvp / jax.jacfwd), but the given op fixes nu "
+                            f"(the operator of one nu, {op.nu}): its derivative would be zero. Omit op=: with nu "
+                            "traced the operator is built inside the trace (dense build), nu's derivative included.")
         # E and the thickness are the scene's: they only scale the operator (and carry its derivatives)
         op = dataclasses.replace(op, stiffness=stiffness_of(scene.mesh, scene.material, op.G.dtype))
     if concrete:

@@ -126,7 +126,11 @@ def _r_nu(values, xp):
     if nu is None:
         return None
     nu = xp.asarray(nu)
-    return (nu > -1.0) & (nu <= 0.5)
+    ok = (nu > -1.0) & (nu <= 0.5)
+    op_nu = _get(values, "op_nu")            # the ν of a given operator (scene.operator() or op=)
+    if op_nu is not None:
+        ok = ok & (xp.abs(nu - xp.asarray(op_nu)) <= 1e3 * _eps(values, nu, xp))
+    return ok
 
 
 def _r_friction(values, xp):
@@ -303,7 +307,8 @@ RULES: tuple[Rule, ...] = (
          f"precision holds (its square times 1e6 finite: below {force_limit(1e-16):.3g} N in float64, "
          f"{force_limit(1e-7):.3g} N in float32)",
          "set Material(E=...) to the material's modulus in Pa (foam ~1e5, rubber ~1e6) and the thickness in m"),
-    Rule("material.nu", _r_nu, "a Poisson's ratio with -1 < nu <= 0.5", "use e.g. nu = 0.3"),
+    Rule("material.nu", _r_nu, "a Poisson's ratio with -1 < nu <= 0.5, and the nu of the operator given as op=",
+         "use e.g. nu = 0.3; with op= given, the nu it was built for (or omit op=)"),
     Rule("material.thickness", _r_positive("material.thickness"), "a finite thickness > 0 m",
          "set Material(thickness=...) in metres"),
     Rule("fingers.radius", _r_radius, f"a finite fingertip radius > 0 m, at most {RADIUS_SHARE:g} times the "

@@ -516,6 +516,23 @@ def test_jacfwd_in_every_number_matches_central_differences(slanted):
         np.testing.assert_array_equal(jax.jacfwd(force)(jnp.asarray(bad)), np.zeros(7), err_msg=names[k])
 
 
+def test_a_traced_nu_other_than_a_given_operators_is_refused(slanted):
+    """A given op fixes ν. Eagerly a scene of another ν is a ValueError; traced, a lane of
+    another ν was the op's squeeze under the scene's name (vmap over ν gave one grip force
+    twice), and its derivative was zero: now that lane is INVALID_INPUT (material.nu), and
+    differentiating ν with op= given is a TypeError that says to omit op=."""
+    from jaxsqueeze.simulation import validate
+    op = slanted.operator()
+    mat = slanted.material
+    f = lambda nu: jsq.squeeze(slanted.replace(material=jsq.Material(mat.E, nu, mat.thickness)), op=op)  # noqa: E731
+    out = jax.vmap(f)(jnp.array([mat.nu, 0.4]))
+    assert [jsq.Status(int(v)) for v in out.status] == [jsq.Status.SUCCESS, jsq.Status.INVALID_INPUT]
+    assert int(out.invalid[1]) == validate.FIELDS.index("material.nu")
+    np.testing.assert_allclose(float(out.grip_force[0]), float(jsq.squeeze(slanted, op=op).grip_force), rtol=1e-12)
+    with pytest.raises(TypeError, match=r"nu is differentiated .* the given op fixes nu .* Omit op="):
+        jax.jvp(lambda nu: f(nu).grip_force, (mat.nu,), (1.0,))
+
+
 def test_reverse_mode_is_refused_with_the_way_to_a_gradient(slanted):
     """README: jax.grad / vjp / jacrev through a squeeze raise a TypeError that names jax.jacfwd
     (JAX's own error was "Linearization failed to produce known values"), also under vmap;
@@ -527,6 +544,10 @@ def test_reverse_mode_is_refused_with_the_way_to_a_gradient(slanted):
     for attempt in attempts:
         with pytest.raises(TypeError, match=r"forward mode only.*jax\.jacfwd"):
             attempt()
+    # README: through the user's own jit or checkpoint, JAX's own words (nothing compiles)
+    for wrap in (jax.jit, jax.checkpoint):
+        with pytest.raises(ValueError, match=r"Linearization failed to produce known values"):
+            jax.grad(wrap(force))(0.3)
 
 
 def test_eager_and_jitted_squeezes_agree(slanted):
