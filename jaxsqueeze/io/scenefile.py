@@ -495,8 +495,8 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
         if bad:
             errs.add(SceneFileError("grip.nodes", f"node(s) {bad} do not exist: the mesh has nodes 0..{mesh.n - 1}"))
         elif grip_nodes[0] == grip_nodes[1]:       # (before relative_depth makes a zero depth of it)
-            errs.add(SceneFileError("grip.nodes", f"both fingers are on node {grip_nodes[0]}: give two different "
-                                    "boundary nodes"))
+            errs.add(SceneFileError("grip.nodes", f"grip=({grip_nodes[0]}, {grip_nodes[1]}) names node {grip_nodes[0]} "
+                                    "twice: give two different boundary nodes"))
         grip, gkey = tuple(grip_nodes), "grip.nodes"
     errs.raise_if_any()
     depth = rho * _grip_distance(mesh, grip) if rho is not None and depth_given is None else depth_given
