@@ -150,7 +150,8 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
                 "best": [{"s": [float(x[0]), float(x[1])], "angle": float(x[2])} for x in gmap.best]},
         "search": {"squeezes": found.squeezes, "starts": len(found.history),
                    "paths": [[{"s": h.x[:2].tolist(), "angle": float(h.x[2]), "quality": h.quality,
-                               "grad_norm": h.grad_norm, "status": int(h.status)} for h in hist]
+                               "grad_norm": h.grad_norm, "status": int(h.status), "undone": bool(h.undone)}
+                              for h in hist]
                              for hist in found.history]},
         "perimeter_m": P,
         "files": paths,

@@ -388,12 +388,15 @@ def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None, ord
 
 
 class Step(NamedTuple):
-    """One iteration of a search: placement (3,), quality, gradient norm, status."""
+    """One iteration of a search: placement (3,), quality, gradient norm, status, and whether
+    the step was undone (it reached a failed or infeasible placement; the search went on from
+    the step before at half the rate)."""
 
     x: np.ndarray
     quality: float
     grad_norm: float
     status: int
+    undone: bool = False
 
 
 class Search(NamedTuple):
@@ -516,10 +519,11 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         state = optimizer.init(u)
         s, g = value_and_grad(u)
         squeezes += 1
-        hist, damp = [], 1.0
+        step = lambda u, s, g, undone=False: Step(np.asarray(u) / scale, float(s.quality),  # noqa: E731
+                                                  float(jnp.linalg.norm(g * mask)), int(s.status), undone)
+        hist, damp = [step(u, s, g)], 1.0
         for it in range(steps):
             ok = int(s.status) == Status.SUCCESS
-            hist.append(Step(np.asarray(u) / scale, float(s.quality), float(jnp.linalg.norm(g * mask)), int(s.status)))
             if ok and float(s.quality) > best_q:
                 best_q, best_x = float(s.quality), np.asarray(u) / scale
             updates, new_state = optimizer.update(-g * mask, state, u)
@@ -528,9 +532,10 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
             squeezes += 1
             if int(s_new.status) != Status.SUCCESS and ok:
                 damp *= 0.5                 # stepped onto a failed / infeasible placement: undo
+                hist.append(step(u_new, s_new, g_new, undone=True))
                 continue
             u, state, s, g = u_new, new_state, s_new, g_new
-        hist.append(Step(np.asarray(u) / scale, float(s.quality), float(jnp.linalg.norm(g * mask)), int(s.status)))
+            hist.append(step(u, s, g))
         if int(s.status) == Status.SUCCESS and float(s.quality) > best_q:
             best_q, best_x = float(s.quality), np.asarray(u) / scale
         histories.append(hist)

@@ -47,12 +47,16 @@ def plot_grasp_map(gmap, search=None, label: str = "quality", ax=None) -> Figure
         ax.plot(best[0, 0] * MM, best[0, 1] * MM, "*", color="white", ms=14, mec="k", mew=0.8)
     if search is not None:
         for k, hist in enumerate(search.history):
-            x = np.array([h.x for h in hist])
+            x = np.array([h.x for h in hist if not h.undone])          # the path the search took
+            tried = np.array([h.x for h in hist if h.undone]).reshape(-1, 3)   # steps it undid
             for a, b in ((0, 1), (1, 0)):
                 ax.plot(x[:, a] * MM, x[:, b] * MM, "-", color="tab:red", lw=1.2,
                         label="search" if (k, a) == (0, 0) else None)
                 ax.plot(x[0, a] * MM, x[0, b] * MM, "o", color="tab:red", ms=4)
                 ax.plot(x[-1, a] * MM, x[-1, b] * MM, "x", color="tab:red", ms=7)
+                ax.plot(tried[:, a] * MM, tried[:, b] * MM, ".", color="0.3", ms=4,
+                        label="undone steps" if (k, a) == (0, 0) and any(h.undone for hs in search.history
+                                                                         for h in hs) else None)
     ax.set_xlabel("finger 0 position s₀ [mm]")
     ax.set_ylabel("finger 1 position s₁ [mm]")
     ax.set_title(f"grasp map: {label} (grey: infeasible or failed)")

@@ -658,6 +658,34 @@ def test_search_reaches_the_best_of_the_exhaustive_map(name):
     np.testing.assert_allclose(float(Q.squeeze_work(res)), found.quality, rtol=1e-9)
 
 
+def test_a_search_history_records_undone_steps_once(ellipse):
+    """A step onto an infeasible placement is undone: the history records it once, with its
+    status and ``undone`` (the placement it started from was listed twice before, as if the
+    search had stood still), and the map's plot draws it apart from the path."""
+    import matplotlib
+    import optax
+    matplotlib.use("Agg")
+    from jaxsqueeze.post.maps import plot_grasp_map
+    P = float(ellipse.curve().perimeter)
+    found = jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01]], optimizer=optax.sgd(2.0),
+                                   steps=5, progress=False)
+    hist = found.history[0]
+    assert len(hist) == 6 and found.squeezes == 6
+    undone = [h for h in hist if h.undone]
+    assert undone and all(h.status != jsq.Status.SUCCESS for h in undone)
+    path = [h for h in hist if not h.undone]
+    assert all(h.status == jsq.Status.SUCCESS for h in path)
+    assert all(np.any(a.x != b.x) for a, b in zip(path, path[1:]))       # it moved at every accepted step
+    assert found.quality == max(h.quality for h in path)
+    from jaxsqueeze.plan.search import GraspMap
+    grid = np.linspace(0.0, P, 4)[:3]
+    status = np.where(np.eye(3, dtype=bool), jsq.Status.INFEASIBLE_GRIP, jsq.Status.SUCCESS)
+    gmap = GraspMap(grid, np.ones((3, 3)), status, np.ones((3, 3)), np.zeros((3, 3)), 0.0, np.zeros((0, 3)), 6)
+    fig = plot_grasp_map(gmap, found)
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert "undone steps" in labels and "search" in labels
+
+
 def test_plot_grasp_map_names_what_it_draws():
     """plot_grasp_map(a squeeze result) failed with "'SqueezeResult' object has no attribute 's'"."""
     import matplotlib
