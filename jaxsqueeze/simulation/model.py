@@ -285,7 +285,7 @@ def push_model(model: Model, grasp: Grasp, st) -> Model:
     # radius behind the start, |angle| near π/2 or beyond), not start inside it, and not
     # overlap a grasping fingertip (a push on a finger's own contact). Otherwise the push
     # phase ends at once with INFEASIBLE_GRIP (margin −π) and pushes nothing
-    touches = jnp.isfinite(t) & (t > -r3)
+    touches = jnp.isfinite(t) & (t > -r3) & (jnp.cos(angle) > 0)
     t = jnp.where(touches, t, 0.0)
     c3 = o + t * v
     held = model.centres(st.d)[:2]

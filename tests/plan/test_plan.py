@@ -546,9 +546,13 @@ def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):
     k = nearest(square.mesh, (0.05, 0.0))
     s3 = float(square.arc_length([k])[0])
     s_grip = float(square.arc_length([square.grip[0]])[0])
+    s_corner = float(square.arc_length([nearest(square.mesh, (0.05, 0.05))])[0])
     work = {}
+    # (at a corner, turned 2 rad, the pusher met the next edge from outside and pushed: SUCCESS,
+    # against the documented rule that cos(angle) <= 0 pushes nothing)
     for s, angle, pushes in ((s3, 0.6, True), (s3, 1.7, False), (s3, np.pi, False), (s_grip, 0.0, False),
-                             (s3, 0.6 + 2 * np.pi, True), (s3, 1.7 - 2 * np.pi, False)):    # angles are directions
+                             (s3, 0.6 + 2 * np.pi, True), (s3, 1.7 - 2 * np.pi, False),   # angles are directions
+                             (s_corner, 2.0, False), (s_corner, -2.0, False)):
         res = jsq.squeeze(square.replace(adversary=plan.Adversary(s=s, push=0.003, angle=angle)))
         assert int(res.squeeze_status) == jsq.Status.SUCCESS
         assert (res.outcome == jsq.Status.SUCCESS) == pushes, (s, angle, res.outcome)
