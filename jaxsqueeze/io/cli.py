@@ -374,13 +374,19 @@ def _simulate(spec, out, args, progress) -> int:
     return 0 if res.outcome == Status.SUCCESS else 1
 
 
+def _num(x, spec: str = ".3f", scale: float = 1.0) -> str:
+    """A number of the summary for the report; ``None`` (a non-finite number: summary.json
+    writes null) as "n/a"."""
+    return "n/a" if x is None else format(float(x) * scale, spec)
+
+
 def _report(s, res, out, np) -> str:
     mm = 1e3
     lines = [f"jaxsqueeze: {s['title']}  ({s['scene_file']})",
              f"  status       {s['status']}: {s['advice']}",
-             f"  final depth  {s['final_depth'] * mm:.3f} mm of {s.get('target_depth', np.nan) * mm:.3f} mm "
-             f"({100 * s['relative_depth']:.1f} % of the grip distance {s['grip_distance'] * mm:.1f} mm), "
-             f"{s['rows']} recorded states"]
+             f"  final depth  {_num(s['final_depth'], scale=mm)} mm of {_num(s.get('target_depth'), scale=mm)} mm "
+             f"({_num(s['relative_depth'], '.1f', 100)} % of the grip distance {_num(s['grip_distance'], '.1f', mm)} "
+             f"mm), {s['rows']} recorded states"]
     from ..post.views import EVENT_LETTERS
 
     seq = s["event_sequence"]
@@ -391,12 +397,12 @@ def _report(s, res, out, np) -> str:
         cr = s["contact_regions"][f"finger{f}"]
         F = s["total_force"][f"finger{f}"]
         regs = "; ".join(
-            f"nodes {r['nodes'][0]}..{r['nodes'][-1]}, polar angle {np.degrees(r['theta_range'][0]):.1f}.."
-            f"{np.degrees(r['theta_range'][1]):.1f} deg" for r in cr["regions"]) or "no contact"
+            f"nodes {r['nodes'][0]}..{r['nodes'][-1]}, polar angle {_num(r['theta_range'][0], '.1f', 180 / np.pi)}.."
+            f"{_num(r['theta_range'][1], '.1f', 180 / np.pi)} deg" for r in cr["regions"]) or "no contact"
         lines.append(f"  finger {f}     {cr['n_stick']} stick + {cr['n_slip']} slip nodes in "
                      f"{len(cr['regions'])} region(s) [{regs}]")
-        lines.append(f"               total force on the object ({F[0]:.3f}, {F[1]:.3f}) N, "
-                     f"|F| = {float(np.hypot(*F)):.3f} N")
+        size = None if None in F else np.hypot(*F)
+        lines.append(f"               total force on the object ({_num(F[0])}, {_num(F[1])}) N, |F| = {_num(size)} N")
     t = s.get("timings", {})
     lines.append("  time         " + ", ".join(f"{k} {v:.1f} s" for k, v in t.items()))
     lines.append(f"  outputs      {out}/: " + ", ".join(s["outputs"].values()))

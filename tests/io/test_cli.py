@@ -418,3 +418,16 @@ def test_post_consumers_honour_count_of_a_jit_result(tmp_path):
         assert r.num_steps == k
     assert os.getcwd() != str(tmp_path)
     plots.plot_events(res)
+
+
+def test_the_report_of_a_summary_with_nulls_says_n_a():
+    """docs/errors.md: summary.json writes null for non-finite numbers (NONFINITE); the printed
+    report formatted them with ':.3f' and the run ended as an internal error (exit 3)."""
+    regions = {"n_stick": 1, "n_slip": 0, "regions": [{"nodes": [3, 3], "theta_range": [None, None]}]}
+    s = {"title": "t", "scene_file": "x.toml", "status": "NONFINITE", "advice": "check the grip",
+         "final_depth": None, "target_depth": 0.004, "relative_depth": None, "grip_distance": None, "rows": 3,
+         "event_sequence": "", "n_events": 0, "contact_regions": {"finger0": regions, "finger1": regions},
+         "total_force": {"finger0": [None, None], "finger1": [1.0, None]}, "timings": {}, "outputs": {}}
+    text = cli._report(s, None, "out", np)
+    assert "final depth  n/a mm of 4.000 mm (n/a % of the grip distance n/a mm)" in text
+    assert "total force on the object (1.000, n/a) N, |F| = n/a N" in text and "polar angle n/a..n/a deg" in text
