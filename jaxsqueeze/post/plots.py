@@ -47,7 +47,15 @@ def _boundary_loops(mesh):
 def _title_state(res, row):
     r = views.row_index(res, row)
     rel = views.relative_depth(res)[r]
-    return f"d = {float(res.depth[r]) * MM:.2f} mm ({100 * rel:.1f} %)"
+    share = f" ({100 * rel:.1f} %)" if np.isfinite(rel) else ""      # (no touch: no grip distance)
+    return f"d = {float(res.depth[r]) * MM:.2f} mm{share}"
+
+
+def _depth_label(res, r) -> str:
+    """The legend label of row r: its depth relative to the grip distance, or in mm where the
+    fingertips never touched (no grip distance to relate it to)."""
+    rel = views.relative_depth(res)[r]
+    return f"d = {100 * rel:.1f} %" if np.isfinite(rel) else f"d = {float(np.asarray(res.depth)[r]) * MM:.2f} mm"
 
 
 def _is_band(mesh) -> bool:
@@ -261,13 +269,15 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
     axs = fig.subplots(2, 2, sharex="col")
     cmap = _cmap(len(rows))
     for f in (0, 1):
+        drawn = False
         for c, r in zip(cmap, rows):
             p = views.force_profile(res, r, f, mesh=mesh)
             if not len(p.s):
                 continue
+            drawn = True
             s = p.s * MM
             ang = np.degrees(p.angle) if degrees else p.angle
-            label = f"d = {100 * p.relative_depth:.1f} %"
+            label = _depth_label(res, r)
             for ax, y in ((axs[0, f], p.density), (axs[1, f], ang)):
                 if smooth:
                     xs, ys = views.spline(s, y)
@@ -278,13 +288,16 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
                 ax.plot(s[st], y[st], "o", color=c, ms=4)
                 ax.plot(s[~st], y[~st], "o", mfc="white", mec=c, ms=4)
         axs[0, f].set_title(f"Finger {f}")
+        if not drawn:
+            for ax in axs[:, f]:
+                ax.text(0.5, 0.5, "no contact", transform=ax.transAxes, ha="center", va="center", color="0.4")
         axs[0, f].set_ylabel("force density [N/m]")
         axs[1, f].set_ylabel("force direction [deg]" if degrees else "force direction [rad]")
         axs[1, f].set_xlabel("arc length along fingertip s [mm]")
         for ax in axs[:, f]:
             ax.grid(True, lw=0.3, alpha=0.6)
     handles = [Line2D([], [], color=c, lw=1.5) for c in cmap]
-    labels = [f"d = {100 * views.relative_depth(res)[r]:.1f} %" for r in rows]
+    labels = [_depth_label(res, r) for r in rows]
     handles += [Line2D([], [], ls="", marker="o", color="0.3"),
                 Line2D([], [], ls="", marker="o", mfc="white", mec="0.3")]
     labels += ["stick node", "slip node"]

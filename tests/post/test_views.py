@@ -132,6 +132,12 @@ def test_a_placed_finger_that_cannot_touch_is_summarised_plotted_and_exported(of
     assert s["grip_distance"] == pytest.approx(float(np.linalg.norm(np.subtract(*P[np.asarray(res.grip)]))), rel=1e-12)
     written = plots.save_all(res, placed, tmp_path / "plots")
     assert len(written) == 4 and all(os.path.getsize(p) > 0 for p in written.values())
+    # its depths in mm, not "nan %" of a grip distance it never had; empty panels say why
+    title = plots.plot_deformed(res, placed.mesh).axes[0].get_title()
+    assert "nan" not in title and title.startswith("Deformed object at d = 0.00 mm")
+    fig = plots.plot_force_profile(res, mesh=placed.mesh)
+    assert [t.get_text() for t in fig.legends[0].get_texts()][0] == "d = 0.00 mm"
+    assert sum(t.get_text() == "no contact" for ax in fig.axes for t in ax.texts) == 4
     export.write_final_vtu(tmp_path / "final.vtu", res, placed)
     export.write_paraview(tmp_path, res, placed, op)
     assert os.path.getsize(tmp_path / "final.vtu") > 0 and os.path.getsize(tmp_path / "squeeze.h5") > 0
