@@ -39,6 +39,12 @@ class PlanSettings:
 KEYS = tuple(PlanSettings.__dataclass_fields__)
 
 
+def feasible_pairs(ok: np.ndarray) -> int:
+    """Pairs of map positions {i, j} with a successful squeeze in either order (a map of
+    fingers that differ squeezes both orders; a mirrored map's are equal): ok (n, n) bool."""
+    ok = np.asarray(ok, bool)
+    return int(np.triu(ok | ok.T, 1).sum())
+
 def plan_settings(table: dict) -> PlanSettings:
     """The :class:`PlanSettings` of a scene file's ``[plan]`` table; ``ValueError`` naming every
     bad key (unknown keys are refused by the scene-file loader)."""
@@ -146,7 +152,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
                  "status": res.outcome.name, "grip_force_N": float(res.grip_force),
                  "squeeze_work_J": float(Q.squeeze_work(res))},
         "map": {"spacing_m": float(gmap.s[1] - gmap.s[0]), "positions": len(gmap.s), "squeezes": gmap.evaluations,
-                "feasible_pairs": int(ok.sum() // 2),
+                "feasible_pairs": feasible_pairs(ok),
                 "best": [{"s": [float(x[0]), float(x[1])], "angle": float(x[2])} for x in gmap.best]},
         "search": {"squeezes": found.squeezes, "starts": len(found.history),
                    "paths": [[{"s": h.x[:2].tolist(), "angle": float(h.x[2]), "quality": h.quality,

@@ -157,3 +157,15 @@ def test_plan_push_settings_without_a_push_and_a_quality_that_needs_one_name_the
     err = capsys.readouterr().err
     assert err.startswith("error: plan.quality: ") and "Adversary" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_feasible_pairs_count_either_order():
+    """summary.json's map.feasible_pairs counted ok.sum() // 2, half the feasible cells: right for
+    a mirrored map, too few for a map of unlike fingers (only one order of a pair may hold)."""
+    import numpy as np
+    from jaxsqueeze.io.planning import feasible_pairs
+    ok = np.zeros((4, 4), bool)
+    ok[0, 1] = ok[1, 0] = True          # both orders: one pair
+    ok[0, 2] = True                     # one order only: one pair
+    ok[3, 1] = True
+    assert feasible_pairs(ok) == 3 and feasible_pairs(ok | ok.T) == 3
