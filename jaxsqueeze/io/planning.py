@@ -45,6 +45,7 @@ def feasible_pairs(ok: np.ndarray) -> int:
     ok = np.asarray(ok, bool)
     return int(np.triu(ok | ok.T, 1).sum())
 
+
 def plan_settings(table: dict) -> PlanSettings:
     """The :class:`PlanSettings` of a scene file's ``[plan]`` table; ``ValueError`` naming every
     bad key (unknown keys are refused by the scene-file loader)."""
