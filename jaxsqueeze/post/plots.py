@@ -48,7 +48,8 @@ def _title_state(res, row):
     r = views.row_index(res, row)
     rel = views.relative_depth(res)[r]
     share = f" ({100 * rel:.1f} %)" if np.isfinite(rel) else ""      # (no touch: no grip distance)
-    return f"d = {float(res.depth[r]) * MM:.2f} mm{share}"
+    push = float(np.asarray(res.push)[r]) if res.push is not None else 0.0
+    return f"d = {float(res.depth[r]) * MM:.2f} mm{share}" + (f", push {push * MM:.2f} mm" if push > 0 else "")
 
 
 def _depth_label(res, r) -> str:

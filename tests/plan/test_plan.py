@@ -482,6 +482,8 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square, tmp_path):
     matplotlib.use("Agg")
     import meshio
     from jaxsqueeze.post import export, plots, views
+    assert plots.plot_deformed(res, sc.mesh).axes[0].get_title().startswith(      # the push in the title
+        f"Deformed object at d = 10.00 mm (10.0 %), push {float(res.push[-1]) * 1e3:.2f} mm")
     pushed = sum(e["phase"] == "push" for e in views.event_table(res))
     assert pushed >= 1 and f"and {pushed} in the adversary's push" in plots.plot_events(res)._suptitle.get_text()
     sq = np.asarray(res.push) == 0
