@@ -248,3 +248,34 @@ def test_out_never_replaces_a_folder_of_the_users(tmp_path, capsys, monkeypatch,
         assert ("empty path" in err) if not out.strip() else ("did not write" in err), err
         assert sorted(os.listdir(home)) == [".git", "notes.txt", "summary.json"]
         assert (home / "notes.txt").read_text() == "mine"
+
+
+def test_a_scene_file_reports_its_problems_in_stages():
+    """docs/errors.md: every problem of the first stage that has any, one line each: a bad ν and
+    a bad radius together; a bad ν hides a bad friction (a later stage) until it is fixed."""
+    from jaxsqueeze.io import scenefile
+
+    def keys(edits):
+        d = tomllib.loads(BASE)
+        for (table, key), value in edits.items():
+            d[table][key] = value
+        with pytest.raises(scenefile.SceneFileError) as e:
+            scenefile.from_dict(d)
+        return [line.split(":")[0] for line in str(e.value).splitlines()]
+
+    nu, radius, mu = ("material", "nu"), ("fingers", "radius"), ("squeeze", "friction")
+    assert keys({nu: 0.7, radius: -0.01}) == ["material.nu", "fingers.radius"]
+    assert keys({nu: 0.7, mu: -0.1}) == ["material.nu"]
+    assert keys({mu: -0.1}) == ["squeeze.friction"]
+
+
+def test_a_squeeze_that_stops_short_exits_1_with_its_outputs(tmp_path, capsys):
+    """README and docs/errors.md: exit 1 when the squeeze ran but did not succeed, with every
+    output written and the status and its advice in summary.json; an existing empty --out
+    folder is taken."""
+    (tmp_path / "out").mkdir()
+    rc, err, out, _ = _run(tmp_path, BASE + "max_steps = 1\n", capsys)
+    assert rc == 1, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "MAX_STEPS" and "max_steps" in s["advice"] and s["rows"] == 2
+    assert set(s["outputs"].values()) <= {p.name for p in out.iterdir()}
