@@ -487,7 +487,10 @@ FOAM32_SCRIPT = textwrap.dedent("""
     from jaxsqueeze.io import scenefile
     res = jsq.squeeze(scenefile.load(os.path.join({root!r}, "jaxsqueeze", "scenes", "foam_square.toml")).scene)
     assert res.forces.dtype.name == "float32"
-    print(json.dumps(dict(status=res.outcome.name, F=res.total_force[-1].tolist(), events=int(res.n_events))))
+    heart = scenefile.load(os.path.join({root!r}, "jaxsqueeze", "scenes", "heart_band.toml")).scene
+    slid = jsq.squeeze(heart.replace(friction_model="frictionless"))
+    print(json.dumps(dict(status=res.outcome.name, F=res.total_force[-1].tolist(), events=int(res.n_events),
+                          heart=[slid.outcome.name, float(slid.final_depth)])))
 """)
 
 
@@ -519,6 +522,14 @@ def test_float32_demo_squeeze_keeps_its_contact_forces_exact():
     scale = np.abs(F64).max()
     assert np.abs(F32 - F64).max() < 1e-4 * scale
     assert np.abs(F32.sum(0)).max() < 1e-5 * scale          # the fingers' forces balance
+    # the frictionless heart band: its grip segment is 2.2 degrees off the surface normal, 3.8 %
+    # of each force tangential, so it stalls at the first step in both precisions (float32 ran
+    # to SUCCESS at 49 times the force: its scaled forces lay below an absolute floor of the
+    # drift test)
+    heart = scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", "heart_band.toml")).scene
+    h64 = jsq.squeeze(heart.replace(friction_model="frictionless"))
+    assert r32["heart"][0] == h64.outcome.name == "STALLED"
+    assert r32["heart"][1] == pytest.approx(float(h64.final_depth), rel=1e-6)
 
 
 def test_demo_at_the_widest_event_tolerance_squeezes_like_the_default():
