@@ -664,11 +664,13 @@ def test_search_reaches_the_best_of_the_exhaustive_map(name):
     np.testing.assert_allclose(float(Q.squeeze_work(res)), found.quality, rtol=1e-9)
 
 
-def test_placements_are_periodic_in_the_perimeter(ellipse):
-    """docs/planning.md: s is an arc length modulo the perimeter P (both directions)."""
-    P = float(ellipse.curve().perimeter)
-    runs = [jsq.squeeze(ellipse.replace(placement=plan.Placement(s=s)))
-            for s in ((0.0, P / 2), (P, 1.5 * P), (-2 * P, -P / 2))]
+def test_placements_are_periodic_in_the_perimeter(square):
+    """docs/planning.md: s is an arc length modulo the perimeter P (both directions). (The
+    placed square of the depth test above: the same compiled squeeze.)"""
+    P = float(square.curve().perimeter)
+    s0 = np.asarray(square.arc_length(square.grip), float)
+    runs = [jsq.squeeze(square.replace(grip=None, placement=plan.Placement(s=s0 + shift)))
+            for shift in ((0.0, 0.0), (P, P), (-2 * P, P))]
     assert all(r.outcome == jsq.Status.SUCCESS and tuple(r.grip) == tuple(runs[0].grip) for r in runs)
     for r in runs[1:]:
         np.testing.assert_allclose(np.asarray(r.forces[-1]), np.asarray(runs[0].forces[-1]), rtol=0,
