@@ -33,33 +33,34 @@ def as_array(x, dtype=None) -> jax.Array:
     return jax.numpy.asarray(x, dtype)
 
 
+def _any_tracer(x, test) -> bool:
+    """True if ``test(tracer)`` holds for a tracer of any leaf of ``x`` or one it wraps (a
+    ``vmap``/``jit`` tracer's ``val``, a JVP tracer's ``primal``), up to 8 levels deep."""
+    def walk(t, depth=0) -> bool:
+        if not isinstance(t, jax.core.Tracer) or depth > 8:
+            return False
+        return test(t) or any(walk(getattr(t, a, None), depth + 1) for a in ("val", "primal"))
+    return any(walk(v) for v in jax.tree.leaves(x))
+
+
 def reverse_mode(x) -> bool:
     """True if any leaf of ``x`` is being differentiated in reverse mode (``jax.grad``,
     ``jax.vjp``, ``jax.jacrev``, ``jax.linearize``), also through ``vmap``/``jit`` tracers
     around it. Read from the tracers' class names (``LinearizeTracer``; a ``JVPTracer`` whose
     tangent is being staged out in older JAX), so a JAX that renames them only loses the
     clearer error, never a result."""
-    def rev(t, depth=0) -> bool:
-        if not isinstance(t, jax.core.Tracer) or depth > 8:
-            return False
+    def rev(t) -> bool:
         name = type(t).__name__
-        if name == "LinearizeTracer":
-            return True
-        if name == "JVPTracer" and type(getattr(t, "tangent", None)).__name__ == "JaxprTracer":
-            return True
-        return any(rev(getattr(t, a, None), depth + 1) for a in ("val", "primal"))
-    return any(rev(v) for v in jax.tree.leaves(x))
+        return name == "LinearizeTracer" or (
+            name == "JVPTracer" and type(getattr(t, "tangent", None)).__name__ == "JaxprTracer")
+    return _any_tracer(x, rev)
 
 
 def differentiated(x) -> bool:
     """True if any leaf of ``x`` carries a forward-mode tangent (``jax.jvp``, ``jax.jacfwd``),
     also through ``vmap``/``jit`` tracers around it (read from the tracers' class names, as
     :func:`reverse_mode`)."""
-    def fwd(t, depth=0) -> bool:
-        if not isinstance(t, jax.core.Tracer) or depth > 8:
-            return False
-        return type(t).__name__ == "JVPTracer" or any(fwd(getattr(t, a, None), depth + 1) for a in ("val", "primal"))
-    return any(fwd(v) for v in jax.tree.leaves(x))
+    return _any_tracer(x, lambda t: type(t).__name__ == "JVPTracer")
 
 
 def numeric(x) -> bool:
