@@ -38,7 +38,8 @@ bordered, operator or linalg modules); it only follows the library's documented 
   docs/numerics.md section 6). A new contact is hypothesized sticking (Section IV-B.1): if
   the rate of its force (from two probes slightly deeper) leaves the cone it slides on the
   edge it leaves through, a C event at the depth it joined (a grip node: at d = 0). Events found in one bisection bracket are applied together (mirror-
-  symmetric pairs share a depth).
+  symmetric pairs share a depth); a contact that pulls lets go (B) and takes no C or D there,
+  and a finger left without contacts ends the squeeze (LOST_CONTACT).
 * D at an event depth: after the events of one depth are applied (and the new contacts'
   hypotheses settled), armed sliding nodes whose rate is negative stick there (D events at
   that depth), one at a time, the most negative rate first, re-solving after each, until no
@@ -444,7 +445,8 @@ class Squeeze:
             c = cfg[k]
             fn, ft = self.cone_components(st, a, k)
             if fn < -ftol:
-                out.append(("B", k, c.finger, fn))
+                out.append(("B", k, c.finger, fn))     # it lets go: no C or D for it
+                continue
             if self.model == "coulomb" and c.mode == 1:
                 marg = cone_margin(fn, ft, self.mu)
                 if marg < -ftol:
@@ -651,6 +653,13 @@ def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, ma
                 cfg[k].armed = False
             elif kind == "D":
                 cfg[k].mode = 1
+        if _failure(sq, cfg) == "LOST_CONTACT":
+            # a finger let go of its last contact: the squeeze ends at this depth, the object free
+            status = "LOST_CONTACT"
+            st = sq.solve(cfg, d) if cfg else dict(keys=[], f=np.zeros((0, 2)), g=np.zeros(3), theta=np.zeros(0),
+                                                   U=np.zeros_like(sq.P), C=sq.centres(d), alpha=sq.alpha(d))
+            record(d, st)
+            break
         cfg, st, slid = _hypothesis(sq, cfg, new, d, probe, ftol)
         events += slid
         status = _failure(sq, cfg)

@@ -510,10 +510,11 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     d* + η to first order). Returns (mode, finger, theta, changed, unsettled, logged, kinds):
     ``logged`` (m,) the nodes whose change is an event of the log, of kinds ``kinds`` (m,).
 
-    Coulomb and full stick: on the first pass a new contact that would pull at the probe is
-    dropped, a B event (in float32: whose force's rate is not positive, as its value is round-off); under
-    Coulomb, one whose force leaves its cone slides against its tangential force, a C event at
-    the depth it joined (a grip node at d = 0). On every pass
+    Coulomb and full stick: on the first pass a new contact that would pull at the probe (in
+    float32: whose force's rate is not positive, as its value is round-off) is dropped, a B event,
+    under full stick, and under Coulomb a grip node at the touch; under Coulomb, any other whose
+    force leaves its cone (a pull included) slides against its tangential force, a C event at the
+    depth it joined (a grip node at d = 0). On every pass
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
@@ -552,8 +553,15 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     on = (ns.mode > FREE) & ~test
     theta, stuck, out = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on)
     if model.cfg.slip_events:
+        # a stick force that pulls lies outside the cone too (Section IV-B.1): a contact made by
+        # event A whose stick force pulls and does not rise slides on the edge its tangential
+        # force (its rate) points to, as released it would sit inside the tip (a sliding contact
+        # that still pulls lets go on a later pass). One whose force rises lets go: d* lies
+        # before its touch (within event_tol). So does a grip node at the touch: the tips leave it
+        side = jnp.where(pull, dsol.ft, ft)
+        pull = pull & ((st.count == 0) | (dsol.fn > 0))
         out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
-        mode = jnp.where(out, jnp.where(ft < 0, SLIP_POS, SLIP_NEG), mode)
+        mode = jnp.where(out, jnp.where(side < 0, SLIP_POS, SLIP_NEG), mode)
         # D at d*, judged once the new contacts' hypotheses hold; one node per pass, the most
         # reversed (a stick changes its neighbours' rates again)
         cand = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out)
@@ -584,7 +592,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     """Phase CHECK: the new contact set solved at d*. Test it by hypothesis; if that changed
     it, update the slots and solve again at d*; else accept the row (and stop with STALLED
     when the event undid itself at the depth it started from, within event_tol: it would repeat
-    forever).
+    forever; a finger left without contacts ends it as LOST_CONTACT instead).
     Returns (state, accept)."""
     mode, finger, theta, changed, unsettled, logged, kinds = _hypothesis(model, st, sol, dsol)
     again = changed & ~unsettled & (st.fault == RUNNING)      # a faulted run stops at this row
@@ -596,7 +604,10 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
         events, n_ev, fault = _log(model, st, logged, kinds, finger, d_star)
         return _with(st, nodes=nodes, added=added, checks=st.checks + 1, events=events, n_ev=n_ev, fault=fault)
 
-    stalled = (jnp.all(st.nodes.mode == st.before) & (d_star <= st.d + model.ev_tol)) | unsettled
+    # a finger left empty is no stall: the row is accepted and the squeeze ends, LOST_CONTACT
+    held, _ = _per_finger(model, st.nodes.mode, st.nodes.finger)
+    stalled = (jnp.all(st.nodes.mode == st.before) & (d_star <= st.d + model.ev_tol) & jnp.all(held > 0)) \
+        | unsettled
     fault = jnp.where(stalled & (st.fault == RUNNING), Status.STALLED, st.fault).astype(jnp.int32)
     return lax.cond(again, retry, lambda: _with(st, fault=fault)), ~again
 

@@ -267,3 +267,42 @@ def test_adversary_push_matches_the_oracle(meshes, name):
     assert abs(float(quality.adversary_work(res)) - W) <= 1e-6 * abs(W)
     np.testing.assert_allclose(np.asarray(quality.finger_work(res)), o.finger_work, rtol=0, atol=1e-6 * abs(W))
     np.testing.assert_allclose(np.asarray(res.push_work), [W, *o.finger_work], rtol=0, atol=1e-6 * abs(W))
+
+
+# ----------------------------------------------------------------------------- contacts that pull
+# Rectangle 80 x 50 mm (8 mm edges, 46 boundary nodes), nu = -0.9. (grip, mu, radius [m], depth [m], rotation,
+# outcome, the event (kind, node) pair that must appear at one depth, in this order)
+PULLING = {
+    # node 23 re-touches finger 0 at 6.105 mm, where sticking would pull it: it slides (A, C at
+    # one depth); the engine once let it go (B), left it inside the tip and stopped, STALLED
+    "a new contact whose stick force pulls slides": ((23, 30), 3.0, 0.08, 0.012, None, "SUCCESS", ("A", 23, "C", 23)),
+    "the same with turning tips": ((21, 1), 1.0, 0.24, 0.0064, [[0.0, -16.43, -0.14], [0.0, 16.69, 0.17]],
+                                   "SLIP_FAILURE", ("A", 21, "C", 21)),
+    # the tips turn away from a grip inside both cones (margin 0.11 rad): both grip contacts pull
+    # at the touch and let go, no finger holds the object (once read as STALLED)
+    "a grip the turning tips leave at the touch": ((4, 18), 1.0, 0.08, 0.0024, [[0.0, 28.21, -0.17], [0.0, 6.63, -0.31]],
+                                                  "LOST_CONTACT", ("B", 18, "B", 4)),
+}
+
+
+@pytest.fixture(scope="module")
+def rectangle():
+    return jsq.shapes.rectangle(0.08, 0.05, max_edge=0.008)
+
+
+@pytest.mark.parametrize("name", list(PULLING))
+def test_contacts_that_pull_match_the_oracle(rectangle, name):
+    grip, mu, radius, depth, rot, outcome, pair = PULLING[name]
+    nu = -0.9
+    scene = jsq.Scene(mesh=rectangle, material=jsq.Material(E=E, nu=nu, thickness=H),
+                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
+    res = jsq.squeeze(scene)
+    o = from_mesh(rectangle, E, nu, H, radius, grip, mu, depth, rotation=rot)
+    L = float(np.ptp(rectangle.points, axis=0).max())
+    assert res.outcome.name == o.status == outcome
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
+    _agree(res, o, L, set("".join(e.kind for e in o.events)))
+    rows = res.events.rows()
+    at = [i for i, (d, n, k, f) in enumerate(rows) if (k, n) == pair[:2]]
+    assert any(i + 1 < len(rows) and rows[i + 1][2:0:-1] == pair[2:] and abs(rows[i + 1][0] - rows[i][0]) <= 1e-9 * L
+               for i in at), rows
