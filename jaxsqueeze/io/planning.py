@@ -88,7 +88,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
 
     import jaxsqueeze as jsq
     from ..plan import quality as Q
-    from ..plan.search import check_search, grasp_map, grid, optimize_placement, quality_of
+    from ..plan.search import check_search, grasp_map, grid, optimize_placement, quality_of, unit_step
     from ..post import plots as figures
     from ..post.maps import plot_grasp_map
     from ..post.views import json_ready
@@ -121,6 +121,9 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
                          "rate; use e.g. \"adam\", \"sgd\" or \"adabelief\"") from None
     try:
         check_search(opt, settings.steps, settings.starts, None, None)     # before the map, not after it
+        if not np.any(unit_step(opt)):          # a constant rate here: a zero first step is every step
+            raise ValueError("its step from a unit gradient is zero, so the search would never move; use e.g. "
+                             "\"adam\", \"sgd\" or \"adabelief\"")
     except ValueError as e:
         raise ValueError(f"plan.optimizer={settings.optimizer!r}: {e}") from None
     spacing = settings.spacing or P / 24
@@ -132,7 +135,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
     if settings.push >= float(op.length):
         raise ValueError(f"plan.push: expected a push [m] shorter than the object ({float(op.length):.4g} m), "
                          f"got {settings.push}")
-    gmap = grasp_map(scene, name, spacing=spacing, op=op, progress=progress)
+    gmap = grasp_map(scene, name, spacing=spacing, op=op, progress=progress, keep=settings.starts)
     found = optimize_placement(scene, name, optimizer=opt, steps=settings.steps, starts=settings.starts,
                                init=gmap.best[:settings.starts] if len(gmap.best) else None, op=op,
                                progress=progress)

@@ -35,11 +35,14 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
+from ..numbers import positive, real_array
 from ..simulation.laws import FREE
 from ..simulation.result import SqueezeResult, norm
+from ..tracing import is_concrete
 
 
 def per_result(fn):
@@ -101,9 +104,15 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01, scene=None):
     contact slides: margin 0), whatever ``friction`` says (μ measured a full-stick map against
     cones the squeeze never applied: margins down to −0.77).
     """
+    if is_concrete(tau):
+        positive(tau, "slip_margin's tau (the smooth minimum's temperature)")
     model = getattr(scene, "friction_model", "coulomb")
     if model != "coulomb":
         friction = jnp.inf if model == "stick" else 0.0
+    if is_concrete(friction):
+        mu = real_array(friction, "slip_margin's friction (the Coulomb μ of the squeeze)")
+        if not np.all(mu >= 0):                      # NaN too; μ = ∞ (full stick) is allowed
+            raise ValueError(f"slip_margin's friction must be ≥ 0 (μ = ∞ for full stick); got {mu.tolist()}")
     surface = _surface(scene)
     batch = jnp.shape(res.depth)[:-1]
     if jnp.ndim(friction) == 0:
@@ -172,4 +181,5 @@ def finger_work(res: SqueezeResult):
 @per_result
 def failure_push(res: SqueezeResult):
     """() push displacement [m] at the last row: where the grasp failed, or the full push."""
+    _push_work(res)                  # a result without an adversary phase has no push to report
     return jnp.asarray(res.push)[res.count - 1]

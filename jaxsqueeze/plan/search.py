@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import compiler
+from ..numbers import real_array
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
 from ..simulation.status import Status
@@ -101,9 +102,9 @@ def candidates(X, name: str = "X") -> np.ndarray:
     how = (f"{name} must be finite (k, 3) candidates (s_0, s_1, angle) [m, m, rad], (k, 2) ones (angle 0), "
            "one such row, or Placement objects")
     try:
-        x = np.asarray(X, float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}={X!r}: {how}.") from None
+        x = real_array(X, name)                  # no complex, boolean or text entries read as numbers
+    except ValueError:
+        raise ValueError(f"{name}={X!r:.200}: {how}.") from None
     x = x[None] if x.ndim == 1 else x
     if x.ndim != 2 or x.shape[1] not in (2, 3) or not len(x) or not np.all(np.isfinite(x)):
         raise ValueError(f"{name} of shape {np.shape(X)}: {how}.")
@@ -260,7 +261,8 @@ def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, c
         return Summary(*(np.concatenate(a) for a in zip(*out)))
     for start in range(0, len(X), chunk):
         part = X[start:start + chunk]
-        pad = np.concatenate([part, np.repeat(part[-1:], chunk - len(part), 0)]) if len(part) < chunk else part
+        size = min(chunk, 1 << (len(part) - 1).bit_length())    # a short chunk padded to a power of two only
+        pad = np.concatenate([part, np.repeat(part[-1:], size - len(part), 0)])
         s = _batch(scene, qfn, op, jnp.asarray(pad))
         out.append(jax.tree.map(lambda a: np.asarray(a)[:len(part)], s))
         if progress:
@@ -302,14 +304,15 @@ def grid(scene: Scene, spacing=None) -> np.ndarray:
                                                        and np.isfinite(float(spacing)) and float(spacing) > 0):
         raise ValueError(f"spacing={spacing!r} must be a finite arc length > 0 m (the outer boundary is {P:.4g} m "
                          f"long; the default is its node spacing, {P / m:.3g} m).")
-    n = int(round(P / float(spacing)))
+    ratio = P / float(spacing)                 # inf for a subnormal spacing
+    if not ratio < 10 * m + 0.5:
+        raise ValueError(f"spacing={float(spacing):.3g} m puts {ratio:.3g} positions on the {P:.4g} m outer boundary, "
+                         f"more than 10 per boundary node ({m} nodes), and a map squeezes every pair of them; use a "
+                         f"spacing of at least {P / (10 * m):.3g} m.")
+    n = int(round(ratio))
     if n < 3:
         raise ValueError(f"spacing={float(spacing):.3g} m puts {n} position(s) on the {P:.4g} m outer boundary; a map "
                          f"needs at least 3: use a spacing of at most {P / 3:.3g} m.")
-    if n > 10 * m:
-        raise ValueError(f"spacing={float(spacing):.3g} m puts {n} positions on the {P:.4g} m outer boundary, more than "
-                         f"10 per boundary node ({m} nodes), and a map squeezes every pair of them; use a spacing of "
-                         f"at least {P / (10 * m):.3g} m.")
     return np.arange(n) * (P / n)
 
 
@@ -415,6 +418,13 @@ class Search(NamedTuple):
     screened: int = 0
 
 
+def unit_step(optimizer) -> np.ndarray:
+    """(3,) the optimizer's first step from a unit gradient at the origin, taken as the search
+    takes one: ``optimizer.update(gradient, state, params)``."""
+    u = jnp.zeros(3)
+    return np.asarray(optimizer.update(jnp.ones(3), optimizer.init(u), u)[0])
+
+
 def check_search(optimizer, steps, starts, budget, init) -> None:
     """ValueError/TypeError for arguments :func:`optimize_placement` cannot use, before any squeeze."""
     _check_count("steps", steps, 0)
@@ -425,18 +435,17 @@ def check_search(optimizer, steps, starts, budget, init) -> None:
         raise TypeError(f"optimizer={optimizer!r} is not an optax optimizer; pass one such as optax.adam(0.02) "
                         "(or None for that default).")
     if optimizer is not None:
-        u = jnp.zeros(3)
-        try:                                   # one step as the search takes it: (gradient, state, params)
-            step, _ = optimizer.update(jnp.ones(3), optimizer.init(u), u)
+        try:
+            step = unit_step(optimizer)
         except TypeError as e:
             raise ValueError(f"the optimizer cannot take a step from a gradient alone ({e}); optimizers with a "
                              "line search (optax.lbfgs, ...) evaluate the quality themselves, which this search "
                              "does not support: use optax.adam, optax.sgd, optax.adabelief, ...") from None
-        if not np.all(np.isfinite(np.asarray(step))):
-            raise ValueError(f"the optimizer's step from a unit gradient is {np.asarray(step).tolist()}, not "
+        if not np.all(np.isfinite(step)):
+            raise ValueError(f"the optimizer's step from a unit gradient is {step.tolist()}, not "
                              "finite: check its learning rate (a finite number > 0, e.g. optax.adam(0.02))")
-        if float(jnp.sum(step)) > 0:           # optax minimizes: its step must go against the gradient
-            raise ValueError(f"the optimizer's step from a unit gradient is {np.asarray(step).tolist()}: along the "
+        if float(np.sum(step)) > 0:            # optax minimizes: its step must go against the gradient
+            raise ValueError(f"the optimizer's step from a unit gradient is {step.tolist()}: along the "
                              "gradient, so the search would walk downhill; pass a minimizer with a learning rate "
                              "> 0 (optax.adam(0.02), optax.sgd(0.01); optax.scale needs a negative factor)")
     if init is not None:
@@ -484,6 +493,10 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         n = len(grid(scene, spacing))
         screened = n * (n - 1) // (1 if ordered else 2)
         X = candidate_pairs(scene, spacing, op=op, ordered=ordered)
+        if budget is not None and int(budget) <= len(X):         # known before any squeeze
+            raise ValueError(f"budget={budget} squeezes is spent before the search starts (the coarse map squeezes "
+                             f"the {len(X)} pairs that pass the cone test, and each start needs at least 1 more): "
+                             "raise the budget, or use a coarser coarse_spacing")
         summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
         squeezes += len(X)
         ok = np.zeros(0, bool) if summ is None else summ.status == Status.SUCCESS
@@ -527,6 +540,14 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
             if ok and float(s.quality) > best_q:
                 best_q, best_x = float(s.quality), np.asarray(u) / scale
             updates, new_state = optimizer.update(-g * mask, state, u)
+            updates = jnp.where(mask > 0, updates, 0.0)       # vary_angle=False: the angle stays (weight decay, noise)
+            finite = np.all(np.isfinite(np.asarray(jnp.where(mask > 0, g, 0.0)))) and np.all(np.isfinite(updates))
+            if ok and not finite:
+                raise ValueError(f"at the placement {np.round(np.asarray(u) / scale, 6).tolist()} (s_0, s_1 [m], angle "
+                                 f"[rad]), which squeezes with SUCCESS, the quality's gradient is "
+                                 f"{np.asarray(g).tolist()} and the optimizer's step {np.asarray(updates).tolist()}: "
+                                 "not finite. Check the quality function's derivatives, or the optimizer's settings "
+                                 "(optax.adam needs eps > 0)")
             u_new = u + damp * updates
             s_new, g_new = value_and_grad(u_new)
             squeezes += 1

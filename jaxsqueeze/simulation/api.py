@@ -271,7 +271,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
             raise ValueError(f"depth = {depth:g} m: expected a depth smaller than the distance between the "
                              f"fingers' first contacts, {between:.4g} m for this placement; "
                              "squeeze less deep, or place the fingers farther apart.")
-        if validate.deep_warning(float(op.length), depth) is None:     # (that one was said before the run)
+        # (the object-size one was said before the run; an infeasible grip squeezed nothing)
+        if validate.deep_warning(float(op.length), depth) is None and int(res.status) != Status.INFEASIBLE_GRIP:
             deep = validate.deep_warning(None, depth, between)
             if deep:
                 warnings.warn(deep, stacklevel=2)
@@ -338,7 +339,7 @@ def check_types(scene, op) -> None:
     is None or a :class:`Compliance`."""
     from ..mechanics.band import Band
     from ..mechanics.material import Material
-    from .scene import Fingers, Settings
+    from .scene import Adversary, Fingers, Placement, Settings
     if not isinstance(scene, Scene):
         raise TypeError(f"squeeze takes a jsq.Scene, got {type(scene).__name__}: build one with "
                         "jsq.Scene(mesh=..., material=jsq.Material(...), fingers=jsq.Fingers(...), grip=...)")
@@ -347,6 +348,11 @@ def check_types(scene, op) -> None:
         if not isinstance(value, kinds):
             want = " or ".join(f"jsq.{k.__name__}" for k in (kinds if isinstance(kinds, tuple) else (kinds,)))
             raise TypeError(f"Scene.{name} must be a {want}, got {type(value).__name__} ({value!r:.60})")
+    for name, kind in (("placement", Placement), ("adversary", Adversary)):
+        value = getattr(scene, name)
+        if value is not None and not isinstance(value, kind):
+            raise TypeError(f"Scene.{name} must be a jsq.{kind.__name__} or None, got {type(value).__name__} "
+                            f"({value!r:.60}): e.g. {name}=jsq.{kind.__name__}(s=...)")
     if scene.grip is not None and not is_concrete(scene.grip):     # traced: its dtype is all there is to check
         kinds = {jnp.result_type(g).kind for g in jax.tree.leaves(scene.grip)}
         if not kinds <= {"i", "u"}:

@@ -96,7 +96,8 @@ def test_plan_push_longer_than_the_object_is_an_input_error(tmp_path, capsys):
 
 @pytest.mark.parametrize("edit, said", [
     ("push = 0.002\npush_angle = 2.0", "error: plan.push_angle: expected an angle from the inward normal below pi/2"),
-    ("push = 0.002\noptimizer = \"scale\"", "along the gradient, so the search would walk downhill")])
+    ("push = 0.002\noptimizer = \"scale\"", "along the gradient, so the search would walk downhill"),
+    ("push = 0.002\noptimizer = \"freeze\"", "its step from a unit gradient is zero, so the search would never move")])
 def test_plan_a_pusher_that_cannot_push_or_an_optimizer_that_descends_names_its_key(tmp_path, capsys, edit, said):
     """push_angle = 2 rad (the pusher moves away from the surface): every cell INFEASIBLE_GRIP
     and "no feasible placement on the coarse map: refine coarse_spacing", a key [plan] does not
@@ -111,7 +112,8 @@ def test_plan_a_pusher_that_cannot_push_or_an_optimizer_that_descends_names_its_
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("spacing, said", [("1e-7", "more than 10 per boundary node"), ("100.0", "at least 3")])
+@pytest.mark.parametrize("spacing, said", [("1e-7", "more than 10 per boundary node"),
+                                           ("1e-310", "more than 10 per boundary node"), ("100.0", "at least 3")])
 def test_plan_spacing_too_fine_or_too_coarse_names_its_key(tmp_path, capsys, spacing, said):
     """plan.spacing of 1e-7 m said "error: spacing=..." without its key; 100 m was cut to 3
     positions quietly (no feasible pair, exit 0). Both: exit 2 naming plan.spacing, no work."""
@@ -169,3 +171,18 @@ def test_feasible_pairs_count_either_order():
     ok[0, 2] = True                     # one order only: one pair
     ok[3, 1] = True
     assert feasible_pairs(ok) == 3 and feasible_pairs(ok | ok.T) == 3
+
+
+def test_plan_starts_beyond_eight_take_as_many_map_cells(tmp_path, capsys, monkeypatch):
+    """[plan] starts = 12 ran 8 starts: the map kept its default 8 best cells."""
+    from jaxsqueeze.plan import search
+    seen = {}
+
+    def spy(*args, **kw):
+        seen.update(kw)
+        raise ValueError("stopped by the test")
+    monkeypatch.setattr(search, "grasp_map", spy)
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE.replace("starts = 2", "starts = 12"))
+    assert cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"]) == 2
+    assert "stopped by the test" in capsys.readouterr().err and seen["keep"] == 12

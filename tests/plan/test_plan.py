@@ -42,8 +42,9 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     for spacing in ("0.1", True, 1j):
         with pytest.raises(ValueError, match="finite arc length > 0"):
             jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
-    with pytest.raises(ValueError, match="more than 10 per boundary node"):
-        jsq.grasp_map(ellipse, "squeeze_work", spacing=1e-6)
+    for spacing in (1e-6, 1e-310, 5e-324):          # subnormal ones overflowed counting positions
+        with pytest.raises(ValueError, match="more than 10 per boundary node"):
+            jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
     with pytest.raises(ValueError, match=r"spacing=100 m puts 0 position\(s\) .* at least 3"):   # was 3 quietly
         jsq.grasp_map(ellipse, "squeeze_work", spacing=100.0)
     with pytest.raises(ValueError, match="one placement"):
@@ -77,6 +78,20 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     with pytest.raises(ValueError, match=r"budget=2 .*no coarse map: init given; each of the 3 starts"):
         jsq.optimize_placement(ellipse, "squeeze_work", init=[[0.0, 0.1], [0.02, 0.12], [0.04, 0.14]], budget=2,
                                progress=False)
+    # a budget the coarse map alone would spend: said before the map (it squeezed it all first)
+    with pytest.raises(ValueError, match=r"budget=1 .*the coarse map squeezes the \d+ pairs that pass the cone test"):
+        jsq.optimize_placement(ellipse, "squeeze_work", budget=1, progress=False)
+    # candidates of complex numbers, booleans or text were read as numbers (True as 1 m)
+    for bad in ([[0.0, 0.1 + 1j]], [[True, 0.1]], [["0.0", "0.1"]]):
+        with pytest.raises(ValueError, match=r"init=.*: init must be finite \(k, 3\) candidates"):
+            jsq.optimize_placement(ellipse, "squeeze_work", init=bad, progress=False)
+        with pytest.raises(ValueError, match=r"X=.*: X must be finite \(k, 3\) candidates"):
+            plan.evaluate(ellipse, bad, progress=False)
+    # a placement or an adversary of another type failed inside the checks (AttributeError)
+    for part in (dict(placement=(0.0, 0.1)), dict(placement={"s": (0.0, 0.1)}), dict(adversary=(0.1, 0.002)),
+                 dict(adversary=plan.Placement(s=(0.0, 0.1)))):
+        with pytest.raises(TypeError, match=r"Scene.(placement|adversary) must be a jsq.(Placement|Adversary) or None"):
+            jsq.squeeze(ellipse.replace(**part))
     # a map's chunk, keep, processes and angle (chunk=0 looped forever, keep=-1 dropped the
     # last best candidate, a NaN angle squeezed NaN placements); a zero coarse spacing of a
     # search silently became the default
@@ -445,6 +460,18 @@ def test_slip_margin_takes_the_cones_of_the_scene_friction_model(square):
             assert 0.95 < got <= 1.0
         else:                     # all slide, forces on the radius: 0 less τ log 2
             assert got == pytest.approx(-0.01 * np.log(2), abs=1e-9)
+    # a temperature or a μ it cannot mean: tau = 0 gave NaN, tau = -1 a margin above 1, μ < 0 a
+    # failing margin for a grasp that holds, μ = "0.5" was read, None failed inside JAX; a push
+    # position asked of a result without a push read 0
+    for kw, match in [(dict(tau=0.0), "tau .* must be a positive"), (dict(tau=-1.0), "tau .* must be a positive"),
+                      (dict(friction=-0.5), r"friction must be ≥ 0 \(μ = ∞ for full stick\); got -0.5"),
+                      (dict(friction=float("nan")), "friction must be ≥ 0"),
+                      (dict(friction="0.5"), "friction .* must be real numbers"),
+                      (dict(friction=None), "friction .* must be real numbers")]:
+        with pytest.raises(ValueError, match=match):
+            Q.slip_margin(res, **{"friction": 0.5, **kw})
+    with pytest.raises(ValueError, match="no adversary phase"):
+        Q.failure_push(res)
 
 
 def test_symmetric_push_is_resisted_equally_by_both_fingers(square, tmp_path):
@@ -703,6 +730,24 @@ def test_a_search_history_records_undone_steps_once(ellipse):
     fig = plot_grasp_map(gmap, found)
     labels = fig.axes[0].get_legend_handles_labels()[1]
     assert "undone steps" in labels and "search" in labels
+
+
+def test_a_search_keeps_its_angle_and_stops_at_a_step_that_is_not_finite(ellipse):
+    """vary_angle=False masked the gradient but not the optimizer's step: weight decay (adamw)
+    or noise moved the angle all the same. A step that is not finite at a successful placement
+    was undone and retried at half scale with the same NaN, every step, and the search returned
+    its start quietly; it is now an error that says where."""
+    import optax
+    P = float(ellipse.curve().perimeter)
+    found = jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01, 0.1]],
+                                   optimizer=optax.adamw(0.02, weight_decay=5.0), steps=2, progress=False)
+    assert [h.x[2] for h in found.history[0]] == [0.1] * 3 and found.best.angle == 0.1
+    assert len({h.x[1] for h in found.history[0]}) == 3                          # while s moved
+    nan_later = optax.GradientTransformation(lambda u: jnp.zeros((), jnp.int32),
+                                             lambda g, n, u=None: (jnp.where(n > 0, jnp.nan, g), n + 1))
+    with pytest.raises(ValueError, match=r"at the placement .* which squeezes with SUCCESS, .* not finite"):
+        jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01]], steps=3, progress=False,
+                               optimizer=optax.chain(optax.sgd(0.02), nan_later))
 
 
 def test_plot_grasp_map_names_what_it_draws():
