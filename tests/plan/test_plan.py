@@ -154,6 +154,15 @@ def test_a_placed_squeeze_deeper_than_its_first_contacts_are_apart_is_invalid(el
     with pytest.raises(ValueError, match=r"depth = 0.2 \(object size 0.1 m\): .* crush"):
         jsq.squeeze(placed.replace(depth=0.2))
     assert jsq.squeeze(placed).outcome == jsq.Status.SUCCESS
+    # both fingers at one point: infeasible, nothing squeezed, and no warning of a depth deeper
+    # than half the (meaningless) distance between the first contacts
+    import warnings
+    one = ellipse.replace(placement=plan.Placement(s=(0.05, 0.05)))
+    a, b = (one.mesh.points[n] for n in np.asarray(jsq.squeeze(one).grip))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = jsq.squeeze(one.replace(depth=0.75 * float(np.linalg.norm(a - b))))
+    assert res.outcome == jsq.Status.INFEASIBLE_GRIP
 
 
 def test_a_rebuilt_equal_scene_reuses_the_compiled_map(ellipse):
@@ -267,6 +276,24 @@ def test_an_accelerator_vmaps_up_to_1024_candidates_per_program():
         assert search._default_chunk(batch, 5000, "cpu") == 64
         assert search._default_chunk(batch, 3, "cpu") == 64
     assert search._default_chunk("processes", 5000, "gpu") == 64
+
+
+def test_a_short_vmap_chunk_is_padded_to_a_power_of_two_only(ellipse, monkeypatch):
+    """A vmap chunk shorter than ``chunk`` was padded to the full chunk, and on a CPU the
+    padding members are squeezed one after another (2 candidates cost 64 squeezes; chunk=10**6
+    with one candidate, a million). Now a short chunk is padded to the next power of two."""
+    from jaxsqueeze.plan import search
+    sizes = []
+
+    def fake(scene, qfn, op, X):
+        sizes.append(len(X))
+        return search.Summary(*(jnp.zeros(len(X)),) * 5)
+    monkeypatch.setattr(search, "_batch", fake)
+    op = ellipse.operator()
+    for n, chunk in ((2, None), (70, 64), (1, 10 ** 6), (5, 4)):
+        summ = search._evaluate(ellipse, np.zeros((n, 3)), "squeeze_work", op, "vmap", chunk, False, None, True)
+        assert len(summ.status) == n
+    assert sizes == [2, 64, 8, 1, 4, 1]
 
 
 def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
