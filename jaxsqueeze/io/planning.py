@@ -147,7 +147,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
         paths["map_png"] = os.path.join(out, "map.png")
         plot_grasp_map(gmap, found, label=name).savefig(paths["map_png"])
         paths["best_png"] = os.path.join(out, "best.png")
-        figures.plot_deformed(res, scene.mesh, title=f"best grasp: {name} = {found.quality:.4g}").savefig(
+        figures.plot_deformed(res, scene, title=f"best grasp: {name} = {found.quality:.4g}").savefig(
             paths["best_png"])
     ok = gmap.feasible()
     summary = {

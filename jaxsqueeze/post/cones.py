@@ -222,6 +222,10 @@ def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) ->
         mu = float(mu)
     P, loops = _geometry(geo, op)
     depth = np.asarray(res.depth, float)
+    if depth[0] != 0:        # rotation, toward and the margin's change are measured from the touch
+        raise ValueError(f"this result's first row is at depth {depth[0]:g} m, not the touch (d = 0): it was squeezed "
+                         "with history=False, which keeps only the last rows, and the cones' turn is measured from "
+                         "the touch; squeeze with the full history (the default)")
     k = len(depth)
     modes, fg = np.asarray(res.modes), np.asarray(res.finger)
     F = np.asarray(res.forces, float)
@@ -270,13 +274,11 @@ def cone_axes(res, obj, axis: str = "surface", friction: float | None = None) ->
     has = fmag > 1e-9 * max(float(np.max(fmag)), 1e-300)     # round-off forces have no direction
     for f in (0, 1):
         nxt = np.flatnonzero(has[:, f])
-        if nxt.size:
-            for r in np.flatnonzero(~has[:, f]):
-                later = nxt[nxt > r]
-                if later.size:
-                    fdir[r, f] = fdir[later[0], f]
-                else:                 # no row with a force: no direction (it read as along the axis)
-                    fdir[r, f] = np.nan
+        for r in np.flatnonzero(~has[:, f]):
+            later = nxt[nxt > r]
+            # no later row with a force (none at all: an infeasible grip): no direction; a zero
+            # vector read as along the axis, inside the cone
+            fdir[r, f] = fdir[later[0], f] if later.size else np.nan
     margin = (np.arctan(mu) - _angle(fdir, ax)) if mu is not None else np.full((k, 2), np.nan)
     rel = depth / views.grip_distance(res)
     return ConeAxes(depth, rel, node, contact, ax, line, force, psi, rotation, toward, margin, axis)

@@ -71,7 +71,8 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     field is known at the final row, or pass ``displacement`` (n, 2) e.g. from
     :func:`jaxsqueeze.views.row_displacement`; otherwise only the deformed boundary), the
     fingertips, and the contact nodes: stick (blue dots) and slip (red dots with an arrow
-    along the fingertip in the slip direction).
+    along the fingertip in the slip direction; none for a frictionless scene, whose direction
+    is not tracked: pass the scene as ``mesh``).
 
     Args:
         zoom: optional ((xmin, xmax), (ymin, ymax)) in mm, or a centre (x, y) [m, user frame]
@@ -85,7 +86,10 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             nodes), off for a mesh.
     """
     res = views.trimmed(res)
-    mesh = views.check_object(res, mesh)     # (a scene gives its mesh)
+    obj = mesh
+    mesh = views.check_object(res, obj)      # (a scene gives its mesh)
+    # a frictionless squeeze labels every sliding contact slip+: its direction is not tracked
+    arrows = getattr(obj, "friction_model", "coulomb") != "frictionless"
     zoom = _zoom(zoom)
     if displacement is not None:
         displacement = real_array(displacement, "displacement", "m")
@@ -109,9 +113,9 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             # centre the close-up between the fingertip centre and its contact
             away = C[f] - np.asarray(mesh.offset, float)
             away = away / max(np.linalg.norm(away), 1e-300)
-            plot_deformed(res, mesh, r, displacement, zoom=(C[f] - away * float(res.radius), h), ax=sub,
+            plot_deformed(res, obj, r, displacement, zoom=(C[f] - away * float(res.radius), h), ax=sub,
                           title=f"finger {f} (close-up)", legend=False, forces=forces)
-        plot_deformed(res, mesh, r, displacement, ax=ax, title=title, show_nodes=show_nodes, legend="figure",
+        plot_deformed(res, obj, r, displacement, ax=ax, title=title, show_nodes=show_nodes, legend="figure",
                       forces=forces)
         return fig
     if ax is None:
@@ -167,8 +171,8 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         ax.plot(X_b[stick, 0], X_b[stick, 1], "o", color=STICK_COLOR, ms=4.5, zorder=6,
                 label=f"stick ({int(stick.sum())})")
         ax.plot(X_b[slip, 0], X_b[slip, 1], "o", color=SLIP_COLOR, ms=4.5, zorder=6,
-                label=f"slip ({int(slip.sum())}), arrow: slip direction")
-        if slip.any():
+                label=f"slip ({int(slip.sum())}), " + ("arrow: slip direction" if arrows else "frictionless"))
+        if slip.any() and arrows:
             k = np.flatnonzero(slip)
             world = theta[k] + alpha[fg[k]]
             sign = np.where(modes[k] == SLIP_POS, 1.0, -1.0)
@@ -406,7 +410,7 @@ def save_all(res, scene, outdir) -> dict:
     views.check_object(res, scene, "scene", takes=("scene",))
     outdir = views.make_folder(outdir)
     mesh = scene.mesh
-    figs = dict(deformed=plot_deformed(res, mesh), force_profile=plot_force_profile(res, mesh=mesh),
+    figs = dict(deformed=plot_deformed(res, scene), force_profile=plot_force_profile(res, mesh=mesh),
                 sliding_profile=plot_sliding_profile(res), events=plot_events(res))
     if _is_band(mesh) and scene.friction_model == "coulomb":
         figs["cones"] = plot_cone_rotation(res, scene)      # Fig. 3: friction-cone rotation

@@ -407,13 +407,14 @@ def sliding_profile(res, finger: int = 0) -> SlidingProfile:
 
 
 # ----------------------------------------------------------------------------- tables
-def event_table(res) -> list[dict]:
+def event_table(res, grip_distance_m: float | None = None) -> list[dict]:
     """Events in order: dicts with phase ("squeeze", or "push" for an adversary's push),
     depth [m] (the squeeze depth; in the push phase the push displacement), relative_depth
-    (depth / D0 in the squeeze phase, None in the push), node (mesh id), kind ('A'..'D'),
+    (depth / D0 in the squeeze phase, None in the push; D0 = ``grip_distance_m`` [m] if given,
+    else read from the result: :func:`grip_distance`), node (mesh id), kind ('A'..'D'),
     meaning, finger (0 still, 1 squeezing, 2 the adversary's pusher)."""
     res = trimmed(res)
-    D0 = grip_distance(res)
+    D0 = grip_distance(res) if grip_distance_m is None else float(grip_distance_m)
     first = int(res.squeeze_events)
     out = []
     for e, (d, n, k, f) in enumerate(zip(*(np.asarray(a) for a in res.events))):
@@ -479,6 +480,7 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
 
     Keys: status, advice, final_depth [m], target_depth [m] (with a scene), grip_distance [m],
     relative_depth, rows, n_events, events (see :func:`event_table`), event_sequence (letters),
+    for INVALID_INPUT ``invalid`` (index, field, expected, fix: the first invalid input),
     total_force [N] per finger at the final depth ({"finger0": [fx, fy], "finger1": ...};
     "finger2" is an adversary's pusher), contact_regions per finger at the final depth (see
     :func:`contact_regions`; per finger also n_stick, n_slip), grip nodes (and, for a mesh
@@ -499,11 +501,11 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
         loops = scene.mesh.loops
     regions = contact_regions(res, -1, loops=loops)
     tf = np.asarray(res.finger_forces)[-1]
-    events = event_table(res)
     D0 = grip_distance(res)
     if scene is not None and not np.isfinite(D0):       # no touch to read it from: the object's nodes
         P = np.asarray(scene.mesh.points, float)
         D0 = float(np.linalg.norm(np.subtract(*P[np.asarray(res.grip)])))
+    events = event_table(res, D0)
     out = dict(
         status=st.name, success=bool(st == Status.SUCCESS), advice=st.advice,
         final_depth=float(res.final_depth), grip_distance=D0,
@@ -515,6 +517,10 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
             regions=regions[f], n_stick=sum(g["n_stick"] for g in regions[f]),
             n_slip=sum(g["n_slip"] for g in regions[f])) for f in range(len(regions))},
     )
+    k = int(np.asarray(res.invalid)) if res.invalid is not None else -1
+    if st == Status.INVALID_INPUT and k >= 0:           # the advice says result.invalid names it: say it here
+        from ..simulation.validate import RULES
+        out["invalid"] = dict(index=k, field=RULES[k].field, expected=RULES[k].requirement, fix=RULES[k].fix)
     out["grip_nodes"] = [int(v) for v in np.asarray(res.grip)]      # where the fingers first touched
     source = getattr(getattr(scene, "mesh", None), "source", None)
     if source is not None:                    # a mesh whose unused points were dropped: the file's numbers

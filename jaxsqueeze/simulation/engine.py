@@ -699,14 +699,14 @@ def let_go(model: Model, st: State) -> State:
     """A squeeze that ended with a finger left without contact (LOST_CONTACT) records that row
     from a singular solve when no contact is left to fix the object's rigid motion: its
     displacements are not finite. The object is let go: no forces, so no deformation, and the
-    rigid motion of the row before (its boundary displacement is that rigid motion). Needs the
-    row before (``Config.history``)."""
+    rigid motion of the row before (its boundary displacement is that rigid motion; none when
+    it lets go at the touch, row 0). Needs the row before (``Config.history``)."""
     if not model.cfg.history:
         return st
     depth, mode, finger, theta, F, u, C, alpha, g, push = st.hist
     k = st.count - 1
-    bad = (st.status == Status.LOST_CONTACT) & (k >= 1) & ~(jnp.all(jnp.isfinite(u[k])) & jnp.all(jnp.isfinite(g[k])))
-    g_k = jnp.where(bad, g[jnp.maximum(k - 1, 0)], g[k])
+    bad = (st.status == Status.LOST_CONTACT) & (k >= 0) & ~(jnp.all(jnp.isfinite(u[k])) & jnp.all(jnp.isfinite(g[k])))
+    g_k = jnp.where(bad, jnp.where(k >= 1, g[jnp.maximum(k - 1, 0)], 0.0), g[k])
     u_k = jnp.where(bad, (model.op.N @ g_k).reshape(u[k].shape), u[k])
     F_k = jnp.where(bad, jnp.zeros_like(F[k]), F[k])
     hist = (depth, mode, finger, theta, F.at[k].set(F_k), u.at[k].set(u_k), C, alpha, g.at[k].set(g_k), push)

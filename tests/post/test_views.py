@@ -143,6 +143,49 @@ def test_a_placed_finger_that_cannot_touch_is_summarised_plotted_and_exported(of
     assert os.path.getsize(tmp_path / "final.vtu") > 0 and os.path.getsize(tmp_path / "squeeze.h5") > 0
 
 
+def test_cones_of_a_grip_outside_its_cones_and_of_a_short_history_are_refused(offset):
+    """A grip outside its cones (INFEASIBLE_GRIP, margin −5.6°) carries no force in any row:
+    grasp_stability called it "neutral" with cone margins of +atan μ (the zero force read as
+    along the axis). A ``history=False`` result, whose first row is the end of the squeeze,
+    gave rotations and margin changes measured from there ("neutral", toward 0)."""
+    from jaxsqueeze.post import cones
+    scene, op, res = offset
+    placed = scene.replace(grip=None, placement=jsq.Placement(s=scene.arc_length(scene.grip)), friction=0.1)
+    bad = jsq.squeeze(placed, op)
+    assert bad.status == jsq.Status.INFEASIBLE_GRIP and -0.2 < float(bad.margin) < 0
+    assert np.all(np.isnan(cones.cone_axes(bad, placed).margin))
+    with pytest.raises(ValueError, match="no contact with a finite force"):
+        cones.grasp_stability(bad, placed)
+    assert cones.grasp_stability(res, scene).label in ("stabilizing", "breaking", "neutral")
+    short = jsq.squeeze(scene, op, history=False)
+    with pytest.raises(ValueError, match=r"first row is at depth 0.01 m, not the touch .* history=False"):
+        cones.grasp_stability(short, scene)
+
+
+def test_plots_and_summary_say_what_a_result_cannot(offset):
+    """A frictionless scene's sliding contacts are all labelled slip+ (their direction is not
+    tracked): plot_deformed drew a slip arrow at each, all one way. An INVALID_INPUT result's
+    summary said "result.invalid names it" and named nothing."""
+    import dataclasses
+    from jaxsqueeze.post import plots
+    from jaxsqueeze.simulation.validate import RULES
+    scene, op, res = offset
+    modes = np.asarray(res.modes).copy()
+    modes[-1][modes[-1] > 0] = 2                        # its two contacts, sliding
+    res = dataclasses.replace(res, modes=modes)
+
+    def quivers(obj):
+        ax = plots.plot_deformed(res, obj, details=False).axes[0]
+        return [c for c in ax.collections if type(c).__name__ == "Quiver"], ax.get_legend_handles_labels()[1]
+    assert quivers(scene)[0] and quivers(scene.mesh)[0]
+    q, labels = quivers(scene.replace(friction_model="frictionless"))
+    assert not q and any(t.endswith("frictionless") for t in labels)
+    bad = dataclasses.replace(res, status=np.asarray(jsq.Status.INVALID_INPUT), invalid=np.asarray(4))
+    s = views.summary(bad)
+    assert s["invalid"] == dict(index=4, field=RULES[4].field, expected=RULES[4].requirement, fix=RULES[4].fix)
+    assert "invalid" not in views.summary(res)
+
+
 def test_views_plots_and_exports_refuse_another_object_of_the_same_node_counts(offset, tmp_path):
     """A result drawn on another mesh with the same node counts (the square scaled 2x) gave a
     picture of fingertips inside the object and no error; plot_deformed, the force profiles,

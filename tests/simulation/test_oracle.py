@@ -302,6 +302,11 @@ def test_contacts_that_pull_match_the_oracle(rectangle, name):
     assert res.outcome.name == o.status == outcome
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     _agree(res, o, L, set("".join(e.kind for e in o.events)))
+    if outcome == "LOST_CONTACT":       # let go at the touch: no deformation, no rigid motion (it read NaN)
+        assert np.all(np.asarray(res.boundary_displacement) == 0) and np.all(np.asarray(res.displacement) == 0)
+        assert np.all(np.asarray(res.rigid) == 0)
+        from jaxsqueeze.post import views
+        assert [e["relative_depth"] for e in views.summary(res, scene)["events"]] == [0.0, 0.0]
     rows = res.events.rows()
     at = [i for i, (d, n, k, f) in enumerate(rows) if (k, n) == pair[:2]]
     assert any(i + 1 < len(rows) and rows[i + 1][2:0:-1] == pair[2:] and abs(rows[i + 1][0] - rows[i][0]) <= 1e-9 * L
