@@ -37,7 +37,8 @@ bordered, operator or linalg modules); it only follows the library's documented 
   evaluated only once the node's rate has been positive (the documented "armed" rule,
   docs/numerics.md section 6). A new contact is hypothesized sticking (Section IV-B.1): if
   the rate of its force (from two probes slightly deeper) leaves the cone it slides on the
-  edge it leaves through, a C event at the depth it joined (a grip node: at d = 0). Events found in one bisection bracket are applied together (mirror-
+  edge it leaves through, a C event at the depth it joined (a grip node: at d = 0); a new
+  slider whose force still pulls and does not rise takes the other edge (no event). Events found in one bisection bracket are applied together (mirror-
   symmetric pairs share a depth); a contact that pulls lets go (B) and takes no C or D there,
   and a finger left without contacts ends the squeeze (LOST_CONTACT).
 * D at an event depth: after the events of one depth are applied (and the new contacts'
@@ -739,6 +740,16 @@ def _hypothesis(sq, cfg, new, d, probe, ftol):
                 if cone_margin(dfn, dft, sq.mu) < 0:
                     c.mode = 2 if dft < 0 else 3
                     slid.append(Event("C", int(sq.bnd[k]), d * sq.L, c.finger))
+        if slid:
+            # the edge is a guess from the stick trial's force rate: a new slider whose force
+            # still pulls at the probe and does not rise takes the other edge, once (no event:
+            # it slides either way); if that pulls too, it lets go by event B
+            s1, s2 = sq.solve(cfg, d + probe), sq.solve(cfg, d + 2 * probe)
+            for a, k in enumerate(s1["keys"]):
+                if k in new and cfg[k].mode >= 2:
+                    fn1, fn2 = sq.cone_components(s1, a, k)[0], sq.cone_components(s2, a, k)[0]
+                    if fn1 <= 0 and fn2 <= fn1:
+                        cfg[k].mode = 5 - cfg[k].mode
         if sq.model == "frictionless":
             st = sq.solve(cfg, d + probe)
             for a, k in enumerate(st["keys"]):

@@ -514,7 +514,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     float32: whose force's rate is not positive, as its value is round-off) is dropped, a B event,
     under full stick, and under Coulomb a grip node at the touch; under Coulomb, any other whose
     force leaves its cone (a pull included) slides against its tangential force, a C event at the
-    depth it joined (a grip node at d = 0). On every pass
+    depth it joined (a grip node at d = 0); on the next pass, one that still pulls with a force
+    not rising takes the other edge (unlogged). On every pass
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
@@ -551,7 +552,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32 else (fn <= 0))
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test
-    theta, stuck, out = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on)
+    theta, stuck, out, flip = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on), jnp.zeros_like(on)
     if model.cfg.slip_events:
         # a stick force that pulls lies outside the cone too (Section IV-B.1): a contact made by
         # event A whose stick force pulls and does not rise slides on the edge its tangential
@@ -562,9 +563,16 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         pull = pull & ((st.count == 0) | (dsol.fn > 0))
         out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
         mode = jnp.where(out, jnp.where(side < 0, SLIP_POS, SLIP_NEG), mode)
+        # that edge is a guess from the stick trial: a new contact that slides and still pulls
+        # (its force not rising) takes the other edge on the next pass, once (unlogged: it
+        # slides either way); if that pulls too, the peel rule lets it go
+        rising = dsol.fn > 0
+        flip = st.added & (ns.mode >= SLIP_POS) & (st.checks == 1) & ~rising & \
+            ((fn <= 0) if fn.dtype != jnp.float32 else True)
+        mode = jnp.where(flip, SLIP_POS + SLIP_NEG - ns.mode, mode)
         # D at d*, judged once the new contacts' hypotheses hold; one node per pass, the most
         # reversed (a stick changes its neighbours' rates again)
-        cand = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out)
+        cand = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out | flip)
         worst = jnp.argmin(jnp.where(cand, sol.rate, jnp.inf))
         stuck = cand & (jnp.arange(cand.shape[0]) == worst)
         mode = jnp.where(stuck, STICK, mode)
@@ -575,7 +583,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # located to event_tol); while it is being pressed harder (its force's rate positive) it
     # is joining, not peeling: letting it go would only make the same A event again at d*
     joining = st.added & (dsol.fn > 0)
-    peeled = on & ~joining & (sol.fn < -share * largest(sol.F)) & (st.checks < SETTLE_ITERS) \
+    peeled = on & ~joining & ~flip & (sol.fn < -share * largest(sol.F)) & (st.checks < SETTLE_ITERS) \
         & jnp.all(held > 0)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled

@@ -270,8 +270,9 @@ def test_adversary_push_matches_the_oracle(meshes, name):
 
 
 # ----------------------------------------------------------------------------- contacts that pull
-# Rectangle 80 x 50 mm (8 mm edges, 46 boundary nodes), nu = -0.9. (grip, mu, radius [m], depth [m], rotation,
-# outcome, the event (kind, node) pair that must appear at one depth, in this order)
+# Rectangle 80 x 50 mm (8 mm edges, 46 boundary nodes) and a hexagon 80 mm across (7 mm edges, 36 boundary
+# nodes), nu = -0.9. (grip, mu, radius [m], depth [m], rotation, outcome, the event (kind, node) pair that
+# must appear at one depth, in this order)
 PULLING = {
     # node 23 re-touches finger 0 at 6.105 mm, where sticking would pull it: it slides (A, C at
     # one depth); the engine once let it go (B), left it inside the tip and stopped, STALLED
@@ -282,26 +283,34 @@ PULLING = {
     # at the touch and let go, no finger holds the object (once read as STALLED)
     "a grip the turning tips leave at the touch": ((4, 18), 1.0, 0.08, 0.0024, [[0.0, 28.21, -0.17], [0.0, 6.63, -0.31]],
                                                   "LOST_CONTACT", ("B", 18, "B", 4)),
+    # node 15 re-touches at 6.80 mm pulling; the edge its stick force points to pulls too (fn
+    # -4.7e-7 N at the probe), the other pushes (+7.3e-7 N): it takes that one (it stalled)
+    "hexagon: a pulling contact takes the other edge": ((14, 23), 3.0, 0.16, 0.012, None, "SUCCESS",
+                                                        ("A", 15, "C", 15)),
 }
 
 
 @pytest.fixture(scope="module")
-def rectangle():
-    return jsq.shapes.rectangle(0.08, 0.05, max_edge=0.008)
+def pulling_meshes():
+    hexagon = [(0.04, 0), (0.02, 0.035), (-0.02, 0.035), (-0.04, 0), (-0.02, -0.035), (0.02, -0.035)]
+    return {"rectangle": jsq.shapes.rectangle(0.08, 0.05, max_edge=0.008),
+            "hexagon": jsq.shapes.polygon(hexagon, max_edge=0.007)}
 
 
 @pytest.mark.parametrize("name", list(PULLING))
-def test_contacts_that_pull_match_the_oracle(rectangle, name):
+def test_contacts_that_pull_match_the_oracle(pulling_meshes, name):
     grip, mu, radius, depth, rot, outcome, pair = PULLING[name]
+    mesh = pulling_meshes["hexagon" if name.startswith("hexagon") else "rectangle"]
     nu = -0.9
-    scene = jsq.Scene(mesh=rectangle, material=jsq.Material(E=E, nu=nu, thickness=H),
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H),
                       fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
     res = jsq.squeeze(scene)
-    o = from_mesh(rectangle, E, nu, H, radius, grip, mu, depth, rotation=rot)
-    L = float(np.ptp(rectangle.points, axis=0).max())
+    o = from_mesh(mesh, E, nu, H, radius, grip, mu, depth, rotation=rot)
+    L = float(np.ptp(mesh.points, axis=0).max())
     assert res.outcome.name == o.status == outcome
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     _agree(res, o, L, set("".join(e.kind for e in o.events)))
+    assert sliding_against_friction(res).size == 0
     if outcome == "LOST_CONTACT":       # let go at the touch: no deformation, no rigid motion (it read NaN)
         assert np.all(np.asarray(res.boundary_displacement) == 0) and np.all(np.asarray(res.displacement) == 0)
         assert np.all(np.asarray(res.rigid) == 0)
