@@ -10,6 +10,19 @@ import jaxsqueeze as jsq
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def hexagon_scene():
+    """A coarse hexagon 80 mm across (7 mm edges), nu = -0.9, mu = 1, fingertips of 3 L: node 30
+    joins finger 1 at 0.73 mm with a force rate 0.0034 rad outside its cone (float32 once kept it
+    sticking), and the grasp fails by total slip at 0.98 mm."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")               # (a coarse mesh: the thin-part warning)
+        mesh = jsq.shapes.polygon([(0.04, 0), (0.02, 0.035), (-0.02, 0.035), (-0.04, 0), (-0.02, -0.035),
+                                   (0.02, -0.035)], max_edge=0.007)
+    return jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=-0.9, thickness=0.0254),
+                     fingers=jsq.Fingers(radius=0.24), grip=(11, 31), friction=1.0, depth=0.0064)
+
+
 def symmetric_square(a=0.1, max_edge=0.005):
     """Mesh of [-a/2, a/2]^2, exactly mirror-symmetric about both axes (a quarter, mirrored)."""
     k = int(np.ceil(a / 2 / max_edge))

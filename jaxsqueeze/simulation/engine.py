@@ -513,7 +513,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     Coulomb and full stick: on the first pass a new contact that would pull at the probe (in
     float32: whose force's rate is not positive, as its value is round-off) is dropped, a B event,
     under full stick, and under Coulomb a grip node at the touch; under Coulomb, any other whose
-    force leaves its cone (a pull included) slides against its tangential force, a C event at the
+    force (in float32: its rate) leaves its cone (a pull included) slides against its tangential force, a C event at the
     depth it joined (a grip node at d = 0); on the next pass, one that still pulls with a force
     not rising takes the other edge (unlogged). On every pass
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
@@ -559,9 +559,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         # force (its rate) points to, as released it would sit inside the tip (a sliding contact
         # that still pulls lets go on a later pass). One whose force rises lets go: d* lies
         # before its touch (within event_tol). So does a grip node at the touch: the tips leave it
-        side = jnp.where(pull, dsol.ft, ft)
+        # in float32 the force at the probe is mostly the normal push of the gap_tol penetration
+        # the contact was found at, which reads as inside the cone: its rate decides, as for the pull
+        cn, ct = (dsol.fn, dsol.ft) if fn.dtype == jnp.float32 else (fn, ft)
+        side = jnp.where(pull, dsol.ft, ct)
         pull = pull & ((st.count == 0) | (dsol.fn > 0))
-        out = test & ~pull & (laws.cone_margin(model.phi, fn, ft) < 0)
+        out = test & ~pull & (laws.cone_margin(model.phi, cn, ct) < 0)
         mode = jnp.where(out, jnp.where(side < 0, SLIP_POS, SLIP_NEG), mode)
         # that edge is a guess from the stick trial: a new contact that slides and still pulls
         # (its force not rising) takes the other edge on the next pass, once (unlogged: it
