@@ -511,11 +511,11 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     ``logged`` (m,) the nodes whose change is an event of the log, of kinds ``kinds`` (m,).
 
     Coulomb and full stick: on the first pass a new contact that would pull at the probe (in
-    float32: whose force's rate is not positive, as its value is round-off) is dropped, a B event,
-    under full stick, and under Coulomb a grip node at the touch; under Coulomb, any other whose
-    force (in float32: its rate) leaves its cone (a pull included) slides against its tangential force, a C event at the
-    depth it joined (a grip node at d = 0); on the next pass, one that still pulls with a force
-    not rising takes the other edge (unlogged). On every pass
+    float32: whose force's rate is not positive, as its value is round-off) is dropped, a B
+    event, under full stick, and under Coulomb a grip node at the touch; under Coulomb, any
+    other whose force (in float32: its rate) leaves its cone (a pull included) slides against
+    its tangential force, a C event at the depth it joined (a grip node at d = 0); on the next
+    pass, one that still pulls with a force not rising takes the other edge (unlogged). On every pass
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
@@ -558,8 +558,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         # event A whose stick force pulls and does not rise slides on the edge its tangential
         # force (its rate) points to, as released it would sit inside the tip (a sliding contact
         # that still pulls lets go on a later pass). One whose force rises lets go: d* lies
-        # before its touch (within event_tol). So does a grip node at the touch: the tips leave it
-        # in float32 the force at the probe is mostly the normal push of the gap_tol penetration
+        # before its touch (within event_tol). So does a grip node at the touch: the tips leave it.
+        # In float32 the force at the probe is mostly the normal push of the gap_tol penetration
         # the contact was found at, which reads as inside the cone: its rate decides, as for the pull
         cn, ct = (dsol.fn, dsol.ft) if fn.dtype == jnp.float32 else (fn, ft)
         side = jnp.where(pull, dsol.ft, ct)
