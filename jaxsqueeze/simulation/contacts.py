@@ -540,7 +540,9 @@ def solve(model: Model, sl: Slots, ns: Nodes, d) -> Solution:
         margin = laws.cone_margin(model.phi, fn, ft)
         other = jnp.where(v.mode == STICK, margin, jnp.where(v.armed, srate, jnp.inf))
         e_slot = jnp.minimum(fn, other)
-        k_slot = jnp.where(fn < other, 1, jnp.where(v.mode == STICK, 2, 3))
+        # B first: a normal force that has fallen below zero releases the contact even where
+        # the cone margin or the slip rate is lower (a force through the cone's apex)
+        k_slot = jnp.where((fn < other) | (fn < 0), 1, jnp.where(v.mode == STICK, 2, 3))
     else:
         e_slot, k_slot = fn, jnp.ones_like(v.mode)
     e = put(e_slot, eA)

@@ -320,3 +320,38 @@ def test_contacts_that_pull_match_the_oracle(pulling_meshes, name):
     at = [i for i, (d, n, k, f) in enumerate(rows) if (k, n) == pair[:2]]
     assert any(i + 1 < len(rows) and rows[i + 1][2:0:-1] == pair[2:] and abs(rows[i + 1][0] - rows[i][0]) <= 1e-9 * L
                for i in at), rows
+
+
+# ----------------------------------------------------------------------------- forces through the cone's apex
+# Rectangle of PULLING, mu = 3, r = 80 mm, depth 12 mm, turning tips: the tips turn until the two
+# grip forces fall through zero together, the force along the grip segment inside both cones but
+# nearer the edge than the axis (where the cone margin is below the normal force). Both
+# contacts release (B); the engine once logged the margin's crossing instead (C, then B, or a
+# stall), and with point contacts went NONFINITE. (grip, rotation, contact, the B depth [mm])
+APEX = {
+    "stick-slip history, then both let go": ((15, 28), [[0.0, 36.578688125151245, -0.006019036384644127],
+                                                         [0.0, -49.949955613376616, -0.09416984159005433]],
+                                             "segment", 11.341517),
+    "the grip alone lets go": ((17, 0), [[0.0, -12.670166399366485, -0.12673960046614352],
+                                         [0.0, 38.55884412192954, -0.1266138729205547]], "segment", 8.58201),
+    "point contacts let go": ((15, 28), [[0.0, 36.578688125151245, -0.006019036384644127],
+                                         [0.0, -49.949955613376616, -0.09416984159005433]], "point", 7.205887),
+}
+
+
+@pytest.mark.parametrize("name", list(APEX))
+def test_forces_through_the_cone_apex_release(pulling_meshes, name):
+    grip, rot, contact, d_mm = APEX[name]
+    mesh, nu, mu, radius, depth = pulling_meshes["rectangle"], -0.9, 3.0, 0.08, 0.012
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H), contact=contact,
+                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
+    res = jsq.squeeze(scene)
+    o = from_mesh(mesh, E, nu, H, radius, grip, mu, depth, rotation=rot, contact=contact,
+                  **({"step": depth / 10} if contact == "point" else {}))
+    L = float(np.ptp(mesh.points, axis=0).max())
+    assert res.outcome.name == o.status == "LOST_CONTACT"
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L and abs(o.final_depth - d_mm * 1e-3) <= 1e-8
+    _agree(res, o, L, set("".join(e.kind for e in o.events)))
+    last = [(k, f) for d, n, k, f in res.events.rows() if abs(d - o.final_depth) <= 1e-9 * L]
+    assert sorted(last) == [("B", 0), ("B", 1)]
+    assert np.all(np.asarray(res.modes[-1]) == 0) and np.all(np.isfinite(np.asarray(res.final_forces)))
