@@ -385,7 +385,7 @@ class Squeeze:
             t = np.c_[-e[:, 1], e[:, 0]]
             fn = np.sum(f * e, 1)
             ft = np.sum(f * t, 1)
-            return (ft + sgn * mu * fn)[sl], fn, ft, t
+            return ft[sl] + sgn[sl] * mu * fn[sl], fn, ft, t      # only sliding nodes (full stick: mu = inf)
 
         def jacobian(e, t, fn, ft):
             """dR_k/dtheta_j of the sliding nodes (eq. 6 differentiated through the bordered solve)."""

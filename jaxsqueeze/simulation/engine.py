@@ -64,7 +64,7 @@ PREDICTIONS = 2
 #: below this fraction of the row's largest contact force (docs/numerics.md §5.1); beyond it the
 #: object would slide away along its drift and the squeeze stops with STALLED
 DRIFT_SHARE = 1e-2
-#: a free node this many gap tolerances inside a fingertip after an event: STALLED (no consistent set)
+#: a free node this many gap tolerances inside a fingertip after an event joins there (event A)
 SUNK_TOLS = 10
 
 
@@ -125,7 +125,7 @@ class State:
     phase: jax.Array        # ADVANCE, LOCATE, CHECK or PRIME
     bracket: Bracket
     d_star: jax.Array       # the depth CHECK solves at
-    added: jax.Array        # (m,) bool: contacts made at d_star, to be tested by hypothesis
+    added: jax.Array        # (m,) int: the CHECK pass at d_star a contact joined at (0: the event), -1 none
     checks: jax.Array       # CHECK passes at d_star
     before: jax.Array       # (m,) modes before the event being resolved (stall test)
     status: jax.Array       # RUNNING or a Status, decided by finish() (reconcile() ends an overflow)
@@ -179,7 +179,7 @@ def init(model: Model) -> State:
     finger = jnp.zeros(m, jnp.int32).at[j].set(1)
     ang = lambda k, f: jnp.arctan2(*(P[k] - C0[f])[::-1]) - a0[f]  # noqa: E731
     theta = jnp.zeros(m, dt).at[i].set(ang(i, 0)).at[j].set(ang(j, 1))
-    added = jnp.zeros(m, bool).at[i].set(True).at[j].set(True)
+    added = jnp.full(m, -1, jnp.int32).at[i].set(0).at[j].set(0)
     nodes = Nodes(mode, finger, theta, jnp.zeros(m, bool))
 
     E, H, F = cfg.max_events, cfg.rows, cfg.fingers
@@ -297,7 +297,7 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
         # a contact made at this event's depth carries the event location's error there (a
         # broad tip's neighbours joined at 6.8e-5 m pulling 1 % of the grip node's small force);
         # the hypothesis judged it by its rate, and the next row by its force
-        new = st.added & (st.phase == CHECK)
+        new = (st.added >= 0) & (st.phase == CHECK)
         off = jnp.any(on & ((jnp.abs(sol.ft) > big) | ((sol.fn < -big) & ~new)))
         fault = jnp.where(off & (fault == RUNNING), Status.STALLED, fault).astype(jnp.int32)
     F, u, g = (jnp.where(start, a, 0.0) for a in (sol.F, sol.u, sol.g))
@@ -473,7 +473,8 @@ def apply_event(model: Model, st: State) -> State:
     nodes = Nodes(mode, finger.astype(jnp.int32), theta, ns.armed & ~changed)
     fault = jnp.where(overflow, Status.OVERFLOW, fault)
     return _with(st, nodes=nodes, events=events, n_ev=n_ev, phase=jnp.array(CHECK, jnp.int32),
-                 d_star=d_star, added=added & (mode > FREE), checks=jnp.array(0, jnp.int32), before=ns.mode,
+                 d_star=d_star, added=jnp.where(added & (mode > FREE), 0, -1).astype(jnp.int32),
+                 checks=jnp.array(0, jnp.int32), before=ns.mode,
                  fault=fault.astype(jnp.int32))
 
 
@@ -521,11 +522,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
     contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row); a contact made at
     d* whose force is rising is joining (d* lies before its touch by up to ``event_tol``), not
-    peeling. Under Coulomb,
-    once the new contacts hold, the armed sliding contact whose slip rate is most reversed at
-    d* sticks there, a D event (:func:`_reversed`), one per pass. With segment contacts, a free
-    node found inside a fingertip (a release that dropped a shear force) is ``unsettled``: the
-    check stops the squeeze with STALLED.
+    peeling. With segment contacts, a free node found inside a fingertip (a release that dropped
+    a shear force) joins there, an A event tested as a new contact on the next pass, for at
+    most ``SETTLE_ITERS`` passes; one still inside after them is ``unsettled``: the check stops
+    the squeeze with STALLED. Under Coulomb, once the new contacts hold, the armed sliding
+    contact whose slip rate is most reversed at d* sticks there, a D event
+    (:func:`_reversed`), one per pass.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
@@ -535,7 +537,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     ft = sol.ft + eta * dsol.ft
     if model.cfg.friction_model == "frictionless":
         inside = (ns.mode == FREE) & (sol.gap + eta * dsol.gap < -model.gap_tol)
-        pull = jnp.where(ns.mode > FREE, jnp.where(st.added, dsol.fn, fn), jnp.inf)
+        pull = jnp.where(ns.mode > FREE, jnp.where(st.added >= 0, dsol.fn, fn), jnp.inf)
         worst = jnp.argmin(pull)
         drop = (jnp.arange(pull.shape[0]) == worst) & (pull[worst] <= 0) & ~jnp.any(inside)
         near, ang = _attach(model, model.op.points + sol.u, st.d_star)
@@ -545,7 +547,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         changed = jnp.any(inside | drop)
         kinds = jnp.where(inside, 0, 1)                     # A: joins, B: lets go
         return mode, finger, theta, changed, changed & (st.checks + 1 >= SETTLE_ITERS), inside | drop, kinds
-    test = st.added & (st.checks == 0)
+    test = st.added == st.checks                          # joined on the last pass (or by the event)
     # at d* a contact just made carries almost no force. In float32 that value is round-off
     # (the foam square's node 89 chattered in and out at 12.0 mm until STALLED), so the sign
     # of the force's rate decides; in float64 the value at the probe d* + η does
@@ -553,6 +555,20 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test
     theta, stuck, out, flip = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on), jnp.zeros_like(on)
+    held, _ = _per_finger(model, ns.mode, ns.finger)
+    # a release that drops a tangential force (full stick: a fingertip that turns drags its
+    # contacts until one pulls) can land a free node inside a fingertip: it joins where it is,
+    # an A event at d* (as the next step's event location would find it at d*), while both
+    # fingers hold a contact (else the squeeze ends, LOST_CONTACT) and for at most
+    # SETTLE_ITERS passes; one still inside after that is ``unsettled``: STALLED. (Point
+    # contacts let the other nodes sink by design.)
+    sunk = (ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol) & jnp.all(held > 0) \
+        if model.cfg.contact == "segment" else jnp.zeros_like(on)
+    join = sunk & (st.checks < SETTLE_ITERS)
+    near, ang = _attach(model, model.op.points + sol.u, st.d_star)
+    mode = jnp.where(join, STICK, mode)
+    finger = jnp.where(join, near, ns.finger).astype(jnp.int32)
+    theta = jnp.where(join, ang, theta)
     if model.cfg.slip_events:
         # a stick force that pulls lies outside the cone too (Section IV-B.1): a contact made by
         # event A whose stick force pulls and does not rise slides on the edge its tangential
@@ -570,33 +586,27 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         # (its force not rising) takes the other edge on the next pass, once (unlogged: it
         # slides either way); if that pulls too, the peel rule lets it go
         rising = dsol.fn > 0
-        flip = st.added & (ns.mode >= SLIP_POS) & (st.checks == 1) & ~rising & \
+        flip = (st.added >= 0) & (ns.mode >= SLIP_POS) & (st.checks == st.added + 1) & ~rising & \
             ((fn <= 0) if fn.dtype != jnp.float32 else True)
         mode = jnp.where(flip, SLIP_POS + SLIP_NEG - ns.mode, mode)
         # D at d*, judged once the new contacts' hypotheses hold; one node per pass, the most
         # reversed (a stick changes its neighbours' rates again)
-        cand = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out | flip)
+        cand = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out | flip | join)
         worst = jnp.argmin(jnp.where(cand, sol.rate, jnp.inf))
         stuck = cand & (jnp.arange(cand.shape[0]) == worst)
         mode = jnp.where(stuck, STICK, mode)
         theta = jnp.where(stuck, st.slots.spread()(sol.th, ns.theta), theta)
     share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
-    held, _ = _per_finger(model, ns.mode, ns.finger)
     # a contact made at this depth pulls at d* when d* lies before its true touch (an event is
     # located to event_tol); while it is being pressed harder (its force's rate positive) it
     # is joining, not peeling: letting it go would only make the same A event again at d*
-    joining = st.added & (dsol.fn > 0)
+    joining = (st.added >= 0) & (dsol.fn > 0)
     peeled = on & ~joining & ~flip & (sol.fn < -share * largest(sol.F)) & (st.checks < SETTLE_ITERS) \
         & jnp.all(held > 0)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled
-    # a release that drops a tangential force (full stick: a fingertip that turns drags its
-    # contacts until one pulls) can land a node inside a fingertip: no contact set is consistent
-    # (point contacts let the other nodes sink by design)
-    sunk = jnp.any((ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol)) if model.cfg.contact == "segment" \
-        else jnp.array(False)
-    return (mode, ns.finger, theta, jnp.any(mode != ns.mode), sunk, pull | peeled | stuck | out,
-            jnp.where(stuck, 3, jnp.where(out, 2, 1)).astype(jnp.int32))
+    return (mode, finger, theta, jnp.any(mode != ns.mode), jnp.any(sunk & ~join), pull | peeled | stuck | out | join,
+            jnp.where(join, 0, jnp.where(stuck, 3, jnp.where(out, 2, 1))).astype(jnp.int32))
 
 
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
@@ -611,7 +621,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     def retry():
         ns = st.nodes
         nodes = Nodes(mode, finger, theta, _arm(ns.armed, sol) & (mode == ns.mode))
-        added = (st.added | (ns.mode == FREE)) & (mode > FREE)
+        added = jnp.where(mode > FREE, jnp.where(ns.mode == FREE, st.checks + 1, st.added), -1).astype(jnp.int32)
         events, n_ev, fault = _log(model, st, logged, kinds, finger, d_star)
         return _with(st, nodes=nodes, added=added, checks=st.checks + 1, events=events, n_ev=n_ev, fault=fault)
 

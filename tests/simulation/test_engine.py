@@ -48,7 +48,8 @@ def test_init_touches_the_grip_nodes_and_the_first_step_records_the_touch(model,
     mode = np.asarray(first.nodes.mode)
     on = np.flatnonzero(mode > FREE)
     assert sorted(on.tolist()) == sorted(np.asarray(model.grip).tolist())
-    assert np.all(mode[on] == STICK) and np.all(np.asarray(first.added)[on])
+    added = np.asarray(first.added)            # the CHECK pass each contact joined at, -1 none
+    assert np.all(mode[on] == STICK) and np.all(added[on] == 0) and np.all(np.delete(added, on) == -1)
     np.testing.assert_array_equal(np.asarray(first.nodes.finger)[np.asarray(model.grip)], [0, 1])
     assert int(np.sum(np.asarray(first.slots.active))) == 2
     st = _step(model, first)
@@ -90,7 +91,7 @@ def test_locate_event_brackets_a_new_contact_and_apply_event_adds_it(model, touc
     assert int(st.phase) == engine.CHECK and int(st.n_ev) >= 1
     assert np.all(np.asarray(st.events[2])[: int(st.n_ev)] == 0)           # kind A
     assert float(b.lo) <= float(st.d_star) <= float(b.hi)
-    added = np.asarray(st.added)
+    added = np.asarray(st.added) == 0                 # joined by the event (pass 0)
     assert added.sum() == int(st.n_ev) and np.all(np.asarray(st.nodes.mode)[added] == STICK)
     assert int(np.sum(np.asarray(st.slots.active))) == 2 + int(st.n_ev)     # reconcile bordered them in
     node, slot, S = np.asarray(st.slots.node), np.asarray(st.slots.slot), int(model.cfg.capacity)
@@ -361,7 +362,7 @@ def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
     sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
                                               (s.d,), (jnp.ones_like(s.d),)))(model, st)
     undone = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
-                                 added=jnp.zeros_like(st.added), checks=jnp.asarray(0, jnp.int32))
+                                 added=jnp.full_like(st.added, -1), checks=jnp.asarray(0, jnp.int32))
     chk = jax.jit(engine.check)
     out, accept = chk(model, undone, sol, dsol, st.d)
     assert bool(accept) and int(out.fault) == Status.STALLED

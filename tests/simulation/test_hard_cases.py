@@ -385,24 +385,37 @@ def test_a_finger_peeling_off_releases_its_contacts_at_one_depth():
     assert res.depth[-2] < res.final_depth and np.all(np.isfinite(res.forces))     # one row for both releases
 
 
-def test_a_release_that_lands_a_node_inside_a_fingertip_stalls():
+def test_a_release_that_lands_a_node_inside_a_fingertip_rejoins_and_stalls_when_it_repeats():
     """Full stick with turning tips (found by the rotating oracle): tip 1 drags its grip node 134
     sideways until its normal force reaches zero while it still carries 1.1 N of shear. Event B
-    drops that shear and the node lands 4.8e-4 L inside the tip: sticking needs a pull, release
-    a penetration, so no contact set is consistent there. The squeeze stops with STALLED at
-    that row (it went on with the node inside the tip, SUCCESS); every row before it holds."""
+    drops that shear and the node lands 4.8e-4 L inside the tip: it joins again where it is (A
+    at the same depth, as the next step's event location would find it; it went on with the
+    node inside the tip, SUCCESS, and later stopped there, STALLED). At 12.16 mm it lets go
+    again, lands inside, joins and pulls at once: sticking needs a pull, release a
+    penetration, so no contact set is consistent there, and after SETTLE_ITERS passes of B/A
+    at one depth the squeeze stops with STALLED at that row. Every row before it holds."""
     import dataclasses
+    from jaxsqueeze.simulation.engine import SETTLE_ITERS, SUNK_TOLS
     mesh = symmetric_square(0.1, 0.01)
     sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
                    fingers=jsq.Fingers(radius=0.03, rotation=[[-27.5, 0.0], [33.5, 0.0]]),
                    grip=(6, 134), friction=0.5, depth=0.015, friction_model="stick")
     res = jsq.squeeze(sc)
-    assert res.status == jsq.Status.STALLED and res.final_depth == pytest.approx(0.011933, abs=1e-6)
-    assert res.events.rows()[-1][1:] == (134, "B", 1)
+    assert res.status == jsq.Status.STALLED and res.final_depth == pytest.approx(0.0121645, abs=1e-6)
+    rows = res.events.rows()
+    first = [i for i, r in enumerate(rows) if r[1:] == (134, "B", 1)][0]
+    assert rows[first][0] == pytest.approx(0.0119328, abs=1e-6) and rows[first + 1][1:] == (134, "A", 1)
+    assert rows[first + 1][0] == rows[first][0]
+    repeat = rows[first + 2:]
+    assert [r[1:] for r in repeat] == [(134, "B" if i % 2 == 0 else "A", 1) for i in range(SETTLE_ITERS + 1)]
+    assert all(r[0] == res.final_depth for r in repeat)
     check_states(dataclasses.replace(res, count=res.count - 1), mesh, 0.5, "stick")
     k = list(np.asarray(res.nodes)).index(134)
-    x = mesh.points[mesh.boundary][k] + np.asarray(res.boundary_displacement[-1][k])
-    assert np.linalg.norm(x - np.asarray(res.centres[-1][1])) - 0.03 < -1e-4 * 0.1      # the last row: inside
+    gap = lambda r: np.linalg.norm(mesh.points[mesh.boundary][k] + np.asarray(res.boundary_displacement[r][k])  # noqa: E731
+                                   - np.asarray(res.centres[r][1])) - 0.03
+    at = int(np.flatnonzero(np.asarray(res.depth) == rows[first][0])[-1])
+    assert res.modes[at][k] == 1 and abs(gap(at)) <= 1e-12          # rejoined on the tip's surface
+    assert res.modes[-1][k] == 0 and gap(-1) < -SUNK_TOLS * 1e-9 * 0.1   # the last row: inside (gap_tol 1e-9 L)
 
 
 def test_step_bound_returns_max_steps():

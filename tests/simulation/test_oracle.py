@@ -355,3 +355,48 @@ def test_forces_through_the_cone_apex_release(pulling_meshes, name):
     last = [(k, f) for d, n, k, f in res.events.rows() if abs(d - o.final_depth) <= 1e-9 * L]
     assert sorted(last) == [("B", 0), ("B", 1)]
     assert np.all(np.asarray(res.modes[-1]) == 0) and np.all(np.isfinite(np.asarray(res.final_forces)))
+
+
+# ----------------------------------------------------------------------------- full stick: a node that sinks
+# A quadrilateral 90 x 70 mm with a triangular hole (8 mm edges, 49 boundary nodes), nu = -0.9, full stick
+# (one compiled program: both rotations have shape (2, 2)). (grip, radius [m], depth [m], rotation, outcome,
+# the events at the release depth)
+SUNK = {
+    # B of node 6 at 5.42 mm drops its shear and leaves node 4 inside tip 0: it joins there (A at
+    # the same depth) and the squeeze goes on to its depth (it stopped with STALLED)
+    "a released neighbour's sunk node joins": ((6, 14), 0.09, 0.011, [[0.0, 0.0], [0.0, 0.0]], "SUCCESS",
+                                               [("B", 6), ("A", 4)]),
+    # tip 1 turns until both its contacts let go, a node left inside it: LOST_CONTACT (it read STALLED)
+    "a finger that lets go of everything": ((31, 23), 0.0135, 0.0036, [[0.0, 0.0], [-67.59, -0.05]], "LOST_CONTACT",
+                                            [("B", 22), ("B", 23)]),
+}
+
+
+@pytest.fixture(scope="module")
+def holed_quad():
+    with pytest.warns(UserWarning, match=r"two elements thick"):            # coarse on purpose
+        return jsq.shapes.polygon([(-0.04, -0.03), (0.04, -0.03), (0.05, 0.03), (-0.03, 0.04)],
+                                  holes=[[(-0.01, -0.01), (0.015, -0.005), (0.005, 0.015)]], max_edge=0.008)
+
+
+@pytest.mark.parametrize("name", list(SUNK))
+def test_full_stick_nodes_left_inside_a_tip_match_the_oracle(holed_quad, name):
+    grip, radius, depth, rot, outcome, at = SUNK[name]
+    mesh, nu = holed_quad, -0.9
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H), friction_model="stick",
+                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=0.5, depth=depth)
+    res = jsq.squeeze(scene)
+    o = from_mesh(mesh, E, nu, H, radius, grip, np.inf, depth, model="stick", rotation=rot)
+    L = float(np.ptp(mesh.points, axis=0).max())
+    assert res.outcome.name == o.status == outcome
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
+    _agree(res, o, L, set("".join(e.kind for e in o.events)))
+    rows = res.events.rows()
+    i = [(k, n) for d, n, k, f in rows].index(at[0])
+    assert sorted((k, n) for d, n, k, f in rows if abs(d - rows[i][0]) <= 1e-9 * L) == sorted(at)
+    if outcome == "SUCCESS":       # no free node inside a tip at any row
+        P = np.asarray(mesh.points)[np.asarray(mesh.boundary)]
+        for r in range(int(res.count)):
+            x = P + np.asarray(res.boundary_displacement[r])
+            gap = np.linalg.norm(x[:, None] - np.asarray(res.centres[r])[None], axis=-1).min(1) - radius
+            assert np.all(gap[np.asarray(res.modes[r]) == 0] > -10 * 1e-9 * L), r
