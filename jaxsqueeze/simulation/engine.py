@@ -309,9 +309,9 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
 def _arm(armed, sol: Solution):
     """Event D fires when the slip rate *crosses* zero. A node whose slip starts with an
     inconsistent rate (a jam: neither sticking nor sliding is consistent there) keeps
-    sliding with its force on the cone edge until its rate has been consistent once (at an
-    accepted row, or in a solve of the contact set at an event depth). This keeps every force
-    admissible and rules out C/D chatter at one depth."""
+    sliding with its force on the cone edge until its rate has been consistent once at an
+    accepted row (a contact set that holds: not the trial sets a CHECK pass rejects). This
+    keeps every force admissible and rules out C/D chatter at one depth."""
     return armed | (sol.rate > 0)
 
 
@@ -620,7 +620,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
 
     def retry():
         ns = st.nodes
-        nodes = Nodes(mode, finger, theta, _arm(ns.armed, sol) & (mode == ns.mode))
+        nodes = Nodes(mode, finger, theta, ns.armed & (mode == ns.mode))   # sol: a set just rejected
         added = jnp.where(mode > FREE, jnp.where(ns.mode == FREE, st.checks + 1, st.added), -1).astype(jnp.int32)
         events, n_ev, fault = _log(model, st, logged, kinds, finger, d_star)
         return _with(st, nodes=nodes, added=added, checks=st.checks + 1, events=events, n_ev=n_ev, fault=fault)

@@ -400,3 +400,24 @@ def test_full_stick_nodes_left_inside_a_tip_match_the_oracle(holed_quad, name):
             x = P + np.asarray(res.boundary_displacement[r])
             gap = np.linalg.norm(x[:, None] - np.asarray(res.centres[r])[None], axis=-1).min(1) - radius
             assert np.all(gap[np.asarray(res.modes[r]) == 0] > -10 * 1e-9 * L), r
+
+
+def test_a_rejected_contact_set_arms_no_sliding_node(pulling_meshes):
+    """Node 28 slides with an inconsistent rate (a jam, unarmed) when node 3 joins at 2.029 mm
+    and slides (A, C). The engine's first pass solves the set with node 3 sticking, where 28's
+    rate is consistent; that set is rejected, yet it armed 28, whose rate in the set that holds
+    is -5.6, so 28 stuck (D) and slid again 1e-8 L deeper (C), and the squeezes parted from
+    there (SUCCESS). Only a set that holds arms a node now, as in the oracle (rectangle of
+    PULLING, nu = 0.49, mu = 3, r = 160 mm, turning tips)."""
+    mesh, nu, mu, radius, depth, grip = pulling_meshes["rectangle"], 0.49, 3.0, 0.16, 0.0025, (7, 29)
+    rot = [[-1712.8, -8.11, 0.0], [-4480.3, -4.04, 0.0]]
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H),
+                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
+    res = jsq.squeeze(scene)
+    o = from_mesh(mesh, E, nu, H, radius, grip, mu, depth, rotation=rot)
+    L = float(np.ptp(mesh.points, axis=0).max())
+    assert res.outcome.name == o.status == "SLIP_FAILURE"       # C 27 at 2.284 mm: finger 1 slides
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
+    _agree(res, o, L, "AACCBBAAACACC")
+    at = [(k, n) for d, n, k, f in res.events.rows() if abs(d - 0.0020288108) <= 1e-9]
+    assert at == [("A", 3), ("C", 3)]
