@@ -60,6 +60,9 @@ PEEL_SHARE = (1e-8, 1e-3)
 #: predicted steps (:func:`ahead`) that may fall short in a row before a plain step (at
 #: event_tol = 1e-9 step the foam square takes 184 solves with 2, 203 with 1, 192 with none)
 PREDICTIONS = 2
+#: short ADVANCE solves in a row (predictions included) after which a dip of an event function
+#: below zero within a step (:func:`advance`) is no longer chased: a bound on the extra solves
+DIP_TRIES = 4
 #: frictionless rows are accepted while the drift rule's tangential forces, and any pull, stay
 #: below this fraction of the row's largest contact force (docs/numerics.md §5.1); beyond it the
 #: object would slide away along its drift and the squeeze stops with STALLED
@@ -144,6 +147,7 @@ class State:
     ff: jax.Array               # (F, 2) finger totals of the last recorded row
     ff0: jax.Array              # (F, 2) finger totals when the push began
     missed: jax.Array           # () int: ADVANCE solves in a row at a predicted crossing that found none
+    limit: jax.Array            # () the next ADVANCE solve goes no deeper (a dip seen in a step), else +inf
 
 
 def _with(st: State, **kw) -> State:
@@ -199,7 +203,7 @@ def init(model: Model) -> State:
         count=i32(0), stats=Stats(*(i32(0),) * 5, zero, *(i32(0),) * 4), squeeze_status=i32(RUNNING),
         squeeze_events=i32(0),
         margin=model.margin, grip=model.grip, invalid=model.invalid, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt),
-        missed=jnp.array(0, jnp.int32))
+        missed=jnp.array(0, jnp.int32), limit=jnp.array(jnp.inf, dt))
 
 
 # ----------------------------------------------------------------------------- one iteration
@@ -221,8 +225,8 @@ def ahead(model: Model, st: State):
     row like any other step, and the next prediction starts closer (its error is quadratic in
     the distance); after ``PREDICTIONS`` short ones in a row the step is a plain one, so that a
     function that bends away from zero (a node grazing a fingertip) cannot shorten the steps
-    again and again."""
-    plain = jnp.minimum(st.d + model.h, model.D)
+    again and again. A dip that :func:`advance` saw in the last step caps the depth."""
+    plain = jnp.minimum(jnp.minimum(st.d + model.h, model.D), st.limit)
     e = st.e - jnp.minimum(st.e, 0.0)          # functions already below zero are floored (advance)
     fall = (e > 0) & (st.de < 0)
     cross = jnp.min(jnp.where(fall, st.d - e / jnp.where(fall, st.de, -1.0), jnp.inf)) + 0.25 * model.ev_tol
@@ -333,17 +337,48 @@ def bracket(model: Model, st: State, sol: Solution, dsol: Solution, d):
 
 def advance(model: Model, st: State, sol: Solution, dsol: Solution, d1):
     """Phase ADVANCE: accept the solve at the depth :func:`ahead` chose, or open the bracket of
-    the earliest event. Returns (state, accept)."""
+    the earliest event. But where an event function is above zero at both ends of the step and
+    its cubic Hermite interpolant dips below zero between them (:func:`_dip`: a crossing and
+    its return within one step, e.g. a cone margin that turns back, which the ends alone do
+    not show, nor a bracket opened by another node's crossing at the end), solve again at the
+    deepest point of the dip first, up to ``DIP_TRIES`` short solves in a row (predictions that
+    fell short count: a function that curves back is what makes them fall short).
+    Returns (state, accept)."""
     floor = jnp.minimum(st.e, 0.0)
     crossed = jnp.any(sol.e < floor)
     b = Bracket(floor, st.d, d1, st.e - floor, st.de, sol.e - floor, dsol.e, sol.kind, sol.ft, sol.th, dsol.th,
                 model.op.points + sol.u, dsol.u, jnp.array(0, jnp.int32))
     s = st.stats
+    inf = jnp.full_like(st.d, jnp.inf)
     opened = _with(st, bracket=b, phase=jnp.array(LOCATE, jnp.int32), stats=s._replace(events=s.events + 1),
-                   missed=jnp.array(0, jnp.int32))
+                   missed=jnp.array(0, jnp.int32), limit=inf)
+    dip, deepest = _dip(b, model.ev_tol)
+    again = jnp.any(dip) & (st.missed < DIP_TRIES)
+    retried = _with(st, limit=jnp.min(jnp.where(dip, deepest, jnp.inf)), missed=st.missed + 1)
     short = d1 < jnp.minimum(st.d + model.h, model.D)         # a predicted crossing that was not there
-    stepped = _with(st, stats=s._replace(steps=s.steps + 1), missed=jnp.where(short, st.missed + 1, 0).astype(jnp.int32))
-    return jax.tree.map(lambda a, c: jnp.where(crossed, a, c), opened, stepped), ~crossed
+    stepped = _with(st, stats=s._replace(steps=s.steps + 1), missed=jnp.where(short, st.missed + 1, 0).astype(jnp.int32),
+                    limit=inf)
+    pick = lambda a, c, r: jnp.where(again, r, jnp.where(crossed, a, c))  # noqa: E731
+    return jax.tree.map(pick, opened, stepped, retried), ~crossed & ~again
+
+
+def _dip(b: Bracket, tol):
+    """((m,) bool, (m,) depth): whether each event function, above zero at both ends of the
+    step [lo, hi] and falling at lo, rising at hi, has a cubic Hermite interpolant (values and
+    rates at both ends) that falls below zero inside, more than ``tol`` from either end, and
+    the depth of its minimum."""
+    w = b.hi - b.lo
+    a0, a1, b0, b1 = b.e_lo, w * b.de_lo, b.e_hi, w * b.de_hi
+    ok = (a0 > 0) & (b0 > 0) & (a1 < 0) & (b1 > 0) & jnp.isfinite(a0 + a1 + b0 + b1)
+    B = 3 * (b0 - a0) - 2 * a1 - b1              # p(t) = a0 + a1 t + B t^2 + A t^3 on t in [0, 1]
+    A = 2 * (a0 - b0) + a1 + b1
+    # p'(0) = a1 < 0 < b1 = p'(1): one minimum inside, the root of p' where it rises, written
+    # without cancellation (B + S > 0 there)
+    S = jnp.sqrt(jnp.maximum(B * B - 3 * A * a1, 0.0))
+    t = jnp.clip(-a1 / jnp.where(ok, B + S, 1.0), 0.0, 1.0)
+    p = a0 + t * (a1 + t * (B + t * A))
+    inside = (t * w > tol) & ((1 - t) * w > tol)
+    return ok & (p < 0) & inside, b.lo + t * w
 
 
 def prime(model: Model, st: State, sol: Solution, dsol: Solution, d):

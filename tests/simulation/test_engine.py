@@ -185,6 +185,31 @@ def test_the_bracket_estimate_finds_the_root_of_a_cubic_from_its_ends():
     assert np.isnan(r[0]) and np.isnan(r[1]) and abs(r[2] - roots[2]) < 1e-12
 
 
+def test_a_dip_below_zero_inside_a_step_is_found_from_its_ends():
+    """engine._dip: an event function above zero at both ends of a step, falling at lo and
+    rising at hi, whose cubic Hermite interpolant falls below zero inside (here quadratics,
+    which the interpolant reproduces): flagged, with the depth of its minimum; one that stays
+    above zero, that does not turn within the step, or whose minimum lies within the tolerance
+    of an end, is not."""
+    lo, hi, c = 0.2, 0.7, 0.45
+    lift = np.array([-0.01, 0.01, -0.01])
+    e = lambda d: (d - c) ** 2 + lift                                    # noqa: E731
+    de = lambda d: np.array([2 * (d - c), 2 * (d - c), -1.0])            # noqa: E731  the third falls at hi
+    z = jnp.zeros(3)
+    b = engine.Bracket(z, jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(e(lo)), jnp.asarray(de(lo)),
+                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z,
+                       jnp.asarray(0, jnp.int32))
+    dip, deepest = engine._dip(b, 1e-3)
+    assert np.asarray(dip).tolist() == [True, False, False]
+    np.testing.assert_allclose(np.asarray(deepest)[:2], [c, c], rtol=0, atol=1e-12)
+    # a dip within the tolerance of an end is a crossing and its return within it: not chased
+    lo2, f = c - 2e-5, lambda d: (d - c) ** 2 - 1e-10                   # noqa: E731
+    near = b._replace(lo=jnp.asarray(lo2), e_lo=jnp.full(3, f(lo2)), de_lo=jnp.full(3, 2 * (lo2 - c)),
+                      e_hi=jnp.full(3, f(hi)), de_hi=jnp.full(3, 2 * (hi - c)))
+    assert float(near.e_lo[0]) > 0 and not np.any(np.asarray(engine._dip(near, 1e-3)[0]))
+    assert np.all(np.asarray(engine._dip(near, 1e-6)[0]))
+
+
 def test_the_event_log_appends_flagged_nodes_in_order_and_drops_past_its_end():
     """``_log`` appends the flagged nodes' events in node order after the ``n_ev`` logged ones
     (a gather since 2026-12-04; it was a scatter), leaves every other entry alone, and past

@@ -421,3 +421,24 @@ def test_a_rejected_contact_set_arms_no_sliding_node(pulling_meshes):
     _agree(res, o, L, "AACCBBAAACACC")
     at = [(k, n) for d, n, k, f in res.events.rows() if abs(d - 0.0020288108) <= 1e-9]
     assert at == [("A", 3), ("C", 3)]
+
+
+def test_a_cone_margin_that_dips_below_zero_within_a_step_is_found(pulling_meshes):
+    """The same squeeze to 12 mm: node 27's cone margin falls below zero at 2.284 mm and turns
+    back up by 2.33 mm, inside one default step (12 mm / 50). Its ends and another node's
+    crossing at the step's end showed no C there, so finger 1 went on and the outcome depended
+    on the target depth and the step (SUCCESS to 12 mm, SLIP_FAILURE at 2.284 mm to 2.5 mm).
+    The dip is found from the values and rates at the step's ends (``engine._dip``): every
+    step from 0.05 to 0.24 mm fails there, as the oracle does at 0.05 mm steps."""
+    mesh, nu, mu, radius, grip = pulling_meshes["rectangle"], 0.49, 3.0, 0.16, (7, 29)
+    rot = [[-1712.8, -8.11, 0.0], [-4480.3, -4.04, 0.0]]
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H),
+                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=0.012)
+    o = from_mesh(mesh, E, nu, H, radius, grip, mu, 0.012, rotation=rot, step=5e-5)
+    L = float(np.ptp(mesh.points, axis=0).max())
+    for step in (None, 2e-4):
+        res = jsq.squeeze(scene.replace(settings=jsq.Settings(step=step)))
+        assert res.outcome.name == o.status == "SLIP_FAILURE"
+        assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
+        _agree(res, o, L, "AACCBBAAACACC")
+        assert res.events.rows()[-1][1:3] == (27, "C")
