@@ -52,7 +52,7 @@ from .status import Status
 
 RUNNING = -1
 ADVANCE, LOCATE, CHECK, PRIME = 0, 1, 2, 3
-SETTLE_ITERS = 6   # CHECK passes that may change a contact set at one depth (settle, peel)
+SETTLE_ITERS = 16  # CHECK passes that may change a contact set at one depth (a cascade: 26 events seen)
 #: a contact pulling by more than this fraction of the largest contact force in a CHECK solve
 #: lets go at that depth (float64, float32): below it the pull is round-off, or a B event of its
 #: own within ``event_tol`` that the next bracket resolves
@@ -556,11 +556,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
     contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row); a contact made at
-    d* whose force is rising is joining (d* lies before its touch by up to ``event_tol``), not
-    peeling. With segment contacts, a free node found inside a fingertip (a release that dropped
-    a shear force) joins there, an A event tested as a new contact on the next pass, for at
-    most ``SETTLE_ITERS`` passes; one still inside after them is ``unsettled``: the check stops
-    the squeeze with STALLED. Under Coulomb, once the new contacts hold, the armed sliding
+    d* whose force is rising, by a pull its rate makes up within ``event_tol``, is joining (d*
+    lies before its touch by up to ``event_tol``), not peeling. With segment contacts, a free
+    node found inside a fingertip (a release that dropped a shear force) joins there, an A
+    event tested as a new contact on the next pass, for at most ``SETTLE_ITERS`` passes. A
+    node still inside, or a contact still peeling, after them is ``unsettled``: the check
+    stops the squeeze with STALLED. Under Coulomb, once the new contacts hold, the armed sliding
     contact whose slip rate is most reversed at d* sticks there, a D event
     (:func:`_reversed`), one per pass.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
@@ -633,14 +634,19 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         theta = jnp.where(stuck, st.slots.spread()(sol.th, ns.theta), theta)
     share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
     # a contact made at this depth pulls at d* when d* lies before its true touch (an event is
-    # located to event_tol); while it is being pressed harder (its force's rate positive) it
-    # is joining, not peeling: letting it go would only make the same A event again at d*
-    joining = (st.added >= 0) & (dsol.fn > 0)
-    peeled = on & ~joining & ~flip & (sol.fn < -share * largest(sol.F)) & (st.checks < SETTLE_ITERS) \
-        & jnp.all(held > 0)
+    # located to event_tol); while it is being pressed harder (its force's rate positive) and
+    # its pull is what that rate makes up within event_tol, it is joining, not peeling: letting
+    # it go would only make the same A event again at d*. A larger pull (other contacts let go
+    # at d*) is a peel
+    joining = (st.added >= 0) & (dsol.fn > 0) & (sol.fn + model.ev_tol * dsol.fn >= 0)
+    peeling = on & ~joining & ~flip & (sol.fn < -share * largest(sol.F)) & jnp.all(held > 0)
+    peeled = peeling & (st.checks < SETTLE_ITERS)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled
-    return (mode, finger, theta, jnp.any(mode != ns.mode), jnp.any(sunk & ~join), pull | peeled | stuck | out | join,
+    # after SETTLE_ITERS passes a node still inside a tip, or a contact still pulling, leaves
+    # the set inconsistent: STALLED, not a row accepted with a pull
+    unsettled = jnp.any(sunk & ~join) | jnp.any(peeling & ~peeled)
+    return (mode, finger, theta, jnp.any(mode != ns.mode), unsettled, pull | peeled | stuck | out | join,
             jnp.where(join, 0, jnp.where(stuck, 3, jnp.where(out, 2, 1))).astype(jnp.int32))
 
 

@@ -17,7 +17,7 @@ import pytest
 
 import jaxsqueeze as jsq
 from jaxsqueeze.plan import quality
-from physics import replay_events, sliding_against_friction, symmetric_square
+from physics import check_states, replay_events, sliding_against_friction, symmetric_square
 from squeeze_oracle import from_mesh
 
 E, NU, H = 1e5, 0.3, 0.0254
@@ -363,8 +363,10 @@ def test_forces_through_the_cone_apex_release(pulling_meshes, name):
 # the events at the release depth)
 SUNK = {
     # B of node 6 at 5.42 mm drops its shear and leaves node 4 inside tip 0: it joins there (A at
-    # the same depth) and the squeeze goes on to its depth (it stopped with STALLED)
-    "a released neighbour's sunk node joins": ((6, 14), 0.09, 0.011, [[0.0, 0.0], [0.0, 0.0]], "SUCCESS",
+    # the same depth) and the squeeze goes on to its depth (it stopped with STALLED). At 11.59 mm
+    # a release starts a cascade of 26 events at one depth, which took more CHECK passes than
+    # there were (SETTLE_ITERS was 6): the row was accepted with node 3 pulling 1.3 N, SUCCESS
+    "a released neighbour's sunk node joins": ((6, 14), 0.09, 0.0135, [[0.0, 0.0], [0.0, 0.0]], "SUCCESS",
                                                [("B", 6), ("A", 4)]),
     # tip 1 turns until both its contacts let go, a node left inside it: LOST_CONTACT (it read STALLED)
     "a finger that lets go of everything": ((31, 23), 0.0135, 0.0036, [[0.0, 0.0], [-67.59, -0.05]], "LOST_CONTACT",
@@ -394,7 +396,8 @@ def test_full_stick_nodes_left_inside_a_tip_match_the_oracle(holed_quad, name):
     rows = res.events.rows()
     i = [(k, n) for d, n, k, f in rows].index(at[0])
     assert sorted((k, n) for d, n, k, f in rows if abs(d - rows[i][0]) <= 1e-9 * L) == sorted(at)
-    if outcome == "SUCCESS":       # no free node inside a tip at any row
+    if outcome == "SUCCESS":       # every row: compressive, on the tips, no free node inside one
+        check_states(res, mesh, 0.5, "stick")
         P = np.asarray(mesh.points)[np.asarray(mesh.boundary)]
         for r in range(int(res.count)):
             x = P + np.asarray(res.boundary_displacement[r])
