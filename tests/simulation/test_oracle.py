@@ -160,16 +160,24 @@ ROTATING = {
 }
 
 
+def _turning(mesh, nu, radius, grip, mu, depth, rot, model="coulomb", contact="segment", step=None):
+    """The scene with fingertips turning by ``rot`` (2, k), the library's squeeze of it, the
+    oracle's (``step``: its step, default depth / 50) and L. Full stick: ``model="stick"``."""
+    stick = model == "stick"
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H), friction_model=model,
+                      contact=contact, fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip,
+                      friction=0.5 if stick else mu, depth=depth)
+    o = from_mesh(mesh, E, nu, H, radius, grip, np.inf if stick else mu, depth, model=model, rotation=rot,
+                  contact=contact, step=step)
+    return scene, jsq.squeeze(scene), o, float(np.ptp(mesh.points, axis=0).max())
+
+
 @pytest.mark.parametrize("name", list(ROTATING))
 def test_rotating_squeeze_matches_the_oracle(meshes, name):
     mu, radius, depth, rot, outcome, kinds = ROTATING[name]
     mesh = meshes["square"]
     grip = (jsq.scene.nearest_boundary_node(mesh, SLANTED[0]), jsq.scene.nearest_boundary_node(mesh, SLANTED[1]))
-    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=NU, thickness=H),
-                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
-    res = jsq.squeeze(scene)
-    o = from_mesh(mesh, E, NU, H, radius, grip, mu, depth, rotation=rot)
-    L = float(np.ptp(mesh.points, axis=0).max())
+    _, res, o, L = _turning(mesh, NU, radius, grip, mu, depth, rot)
 
     assert res.outcome.name == o.status == outcome
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
@@ -301,12 +309,7 @@ def pulling_meshes():
 def test_contacts_that_pull_match_the_oracle(pulling_meshes, name):
     grip, mu, radius, depth, rot, outcome, pair = PULLING[name]
     mesh = pulling_meshes["hexagon" if name.startswith("hexagon") else "rectangle"]
-    nu = -0.9
-    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H),
-                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
-    res = jsq.squeeze(scene)
-    o = from_mesh(mesh, E, nu, H, radius, grip, mu, depth, rotation=rot)
-    L = float(np.ptp(mesh.points, axis=0).max())
+    scene, res, o, L = _turning(mesh, -0.9, radius, grip, mu, depth, rot)
     assert res.outcome.name == o.status == outcome
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     _agree(res, o, L, set("".join(e.kind for e in o.events)))
@@ -343,12 +346,8 @@ APEX = {
 def test_forces_through_the_cone_apex_release(pulling_meshes, name):
     grip, rot, contact, d_mm = APEX[name]
     mesh, nu, mu, radius, depth = pulling_meshes["rectangle"], -0.9, 3.0, 0.08, 0.012
-    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H), contact=contact,
-                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
-    res = jsq.squeeze(scene)
-    o = from_mesh(mesh, E, nu, H, radius, grip, mu, depth, rotation=rot, contact=contact,
-                  **({"step": depth / 10} if contact == "point" else {}))
-    L = float(np.ptp(mesh.points, axis=0).max())
+    _, res, o, L = _turning(mesh, nu, radius, grip, mu, depth, rot, contact=contact,
+                            step=depth / 10 if contact == "point" else None)
     assert res.outcome.name == o.status == "LOST_CONTACT"
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L and abs(o.final_depth - d_mm * 1e-3) <= 1e-8
     _agree(res, o, L, set("".join(e.kind for e in o.events)))
@@ -385,11 +384,7 @@ def holed_quad():
 def test_full_stick_nodes_left_inside_a_tip_match_the_oracle(holed_quad, name):
     grip, radius, depth, rot, outcome, at = SUNK[name]
     mesh, nu = holed_quad, -0.9
-    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H), friction_model="stick",
-                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=0.5, depth=depth)
-    res = jsq.squeeze(scene)
-    o = from_mesh(mesh, E, nu, H, radius, grip, np.inf, depth, model="stick", rotation=rot)
-    L = float(np.ptp(mesh.points, axis=0).max())
+    _, res, o, L = _turning(mesh, nu, radius, grip, None, depth, rot, model="stick")
     assert res.outcome.name == o.status == outcome
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     _agree(res, o, L, set("".join(e.kind for e in o.events)))
@@ -414,11 +409,7 @@ def test_a_rejected_contact_set_arms_no_sliding_node(pulling_meshes):
     PULLING, nu = 0.49, mu = 3, r = 160 mm, turning tips)."""
     mesh, nu, mu, radius, depth, grip = pulling_meshes["rectangle"], 0.49, 3.0, 0.16, 0.0025, (7, 29)
     rot = [[-1712.8, -8.11, 0.0], [-4480.3, -4.04, 0.0]]
-    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=nu, thickness=H),
-                      fingers=jsq.Fingers(radius=radius, rotation=rot), grip=grip, friction=mu, depth=depth)
-    res = jsq.squeeze(scene)
-    o = from_mesh(mesh, E, nu, H, radius, grip, mu, depth, rotation=rot)
-    L = float(np.ptp(mesh.points, axis=0).max())
+    _, res, o, L = _turning(mesh, nu, radius, grip, mu, depth, rot)
     assert res.outcome.name == o.status == "SLIP_FAILURE"       # C 27 at 2.284 mm: finger 1 slides
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     _agree(res, o, L, "AACCBBAAACACC")
