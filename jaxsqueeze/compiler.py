@@ -66,6 +66,12 @@ NO_CUSTOM_FUSIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_cpu_experi
 CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1,
                "xla_disable_hlo_passes": "tree_reduction_rewriter",
                "xla_cpu_copy_insertion_use_region_analysis": True, **NO_CUSTOM_FUSIONS}
+#: options left out of float32 programs (x64 off): with fewer copies, the float32 squeeze
+#: loop's body holds operations that XLA:CPU's thunk executor finds independent, so it runs
+#: them on both threads of its pool, and every hop between threads costs microseconds (the
+#: foam square's squeeze 13.5-14.5 against 8.2-9.0 ms without region analysis; float64 stays
+#: on one thread with it and gains 5 %; benchmarks/README.md, 2026-12-05)
+NOT_FLOAT32 = ("xla_cpu_copy_insertion_use_region_analysis",)
 
 
 def platform() -> str:
@@ -82,8 +88,12 @@ def platform() -> str:
 def options() -> tuple:
     """The (name, value) pairs of :data:`CPU_OPTIONS` that this jaxlib accepts on the
     :func:`platform` a program is compiled for, probed by compiling a one-op program with all
-    of them (and with each alone when that fails); ``()`` off the CPU."""
-    return _options(platform())
+    of them (and with each alone when that fails), less :data:`NOT_FLOAT32` where x64 is off
+    (the precision of the library's programs); ``()`` off the CPU."""
+    opts = _options(platform())
+    if not jax.config.jax_enable_x64:
+        opts = tuple(item for item in opts if item[0] not in NOT_FLOAT32)
+    return opts
 
 
 @functools.lru_cache(maxsize=None)

@@ -82,6 +82,28 @@ def test_library_programs_copy_fewer_buffers_around_conditionals_in_loops():
         np.testing.assert_array_equal(a, b)
 
 
+def test_float32_programs_compile_without_region_analysis():
+    """Region analysis lets XLA:CPU run the float32 squeeze loop's operations on two threads,
+    whose hops cost more than the copies it saves (``compiler.NOT_FLOAT32``): a top-level
+    program compiled with x64 off leaves it out, one with x64 on keeps it, and each precision
+    gets its own compiled program with the same values."""
+    key = ("xla_cpu_copy_insertion_use_region_analysis", True)
+    if key not in compiler._options(compiler.platform()):
+        pytest.skip("this jaxlib does not take xla_cpu_copy_insertion_use_region_analysis")
+    f = compiler.jit(lambda x: jnp.cumsum(x * x))
+    with jax.enable_x64(True):
+        assert key in compiler.options()
+        wide = f(jnp.linspace(0.0, 1.0, 7))
+        top64 = f._top()
+    with jax.enable_x64(False):
+        opts = compiler.options()
+        assert key not in opts and set(opts) == set(compiler._options(compiler.platform())) - {key}
+        narrow = f(jnp.linspace(0.0, 1.0, 7))
+        assert f._top() is not top64
+    assert wide.dtype == jnp.float64 and narrow.dtype == jnp.float32
+    np.testing.assert_allclose(narrow, wide, rtol=1e-6)
+
+
 def test_an_option_this_jaxlib_rejects_is_left_out(fresh_options):
     if jax.default_backend() == "cpu":   # the others are kept
         fresh_options.setattr(compiler, "CPU_OPTIONS", {"xla_cpu_no_such_option_in_any_jaxlib": True,
