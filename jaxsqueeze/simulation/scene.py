@@ -77,9 +77,12 @@ class Placement:
 
     s: (2,) arc length [m] of finger 0 (still) and finger 1 (squeezing) along the outer
         boundary loop, measured from its first node (``mesh.boundary[0]``) with the material
-        on the left (counterclockwise); periodic in the perimeter, so any real number works.
+        on the left (counterclockwise); periodic in the perimeter: any value within 1,000
+        object sizes of 0 is a position (``validate.MAX_WRAP``; farther, the wrapped position
+        would be round-off, and the squeeze refuses it).
     angle: () offset [rad] of the squeeze direction, counterclockwise, from the paper's
-        (along the line from p(s_1) to p(s_0): finger 1 moves toward finger 0).
+        (along the line from p(s_1) to p(s_0): finger 1 moves toward finger 0); within
+        1,000 rad of 0.
 
     Each fingertip centre starts at p(s_i) + r n(s_i) on a C² spline through the boundary
     nodes (:func:`jaxsqueeze.geometry.boundary.curve`), then both close in along the squeeze
@@ -107,11 +110,12 @@ class Adversary:
     """A third round fingertip that pushes the grasped object after the squeeze (the adversary
     of Jia, Guo and Lin, IJRR 2014), as a second loading phase of the same event loop.
 
-    s: () arc length [m] of the pushed boundary point (as in :class:`Placement`).
+    s: () arc length [m] of the pushed boundary point (as in :class:`Placement`, within
+        1,000 object sizes of 0).
     push: () push displacement [m] > 0, shorter than the object.
     angle: () push direction offset [rad] from the inward normal at s; a direction, so
-        periodic in 2π (angle and angle + 2π push alike); pushing needs it within a right
-        angle of the inward normal (cos angle > 0).
+        periodic in 2π (angle and angle + 2π push alike, within 1,000 rad of 0); pushing
+        needs it within a right angle of the inward normal (cos angle > 0).
     radius: () fingertip radius [m]; None: the grasping fingers' radius.
     step: () push step [m], at most the push and the pusher's radius; None: push / 50, or
         the pusher's radius where that is smaller.

@@ -261,11 +261,25 @@ def _r_rotation(values, xp):
     return ok & xp.all(turn <= MAX_ROTATION, axis=-1)
 
 
+#: the largest |arc length| of a placement or adversary, in object sizes, and the largest
+#: |angle| [rad]: both wrap (round the perimeter, round the circle), and wrapping a value X
+#: keeps it only to X * eps (at 1e15 m the wrapped position of a 0.1 m square is noise)
+MAX_WRAP = 1e3
+
+
+def _wrappable(xp, values, s, angle):
+    """s [m] and angle [rad] finite and within MAX_WRAP object sizes / radians of zero."""
+    s, angle = xp.asarray(s), xp.asarray(angle)
+    ok = xp.isfinite(s) & xp.isfinite(angle) & (xp.abs(angle) <= MAX_WRAP)
+    size = _get(values, "size")
+    return ok if size is None else ok & (xp.abs(s) <= MAX_WRAP * xp.asarray(size))
+
+
 def _r_placement(values, xp):
     s, a = _get(values, "placement.s"), _get(values, "placement.angle")
     if s is None:
         return None
-    return xp.all(xp.isfinite(xp.asarray(s)), axis=-1) & xp.isfinite(xp.asarray(a))
+    return xp.all(_wrappable(xp, values, s, xp.asarray(a)[..., None]), axis=-1)
 
 
 def _r_adversary(values, xp):
@@ -273,7 +287,7 @@ def _r_adversary(values, xp):
     if push is None:
         return None
     push, r, h = (xp.asarray(values[k]) for k in ("adversary.push", "adversary.radius", "adversary.step"))
-    ok = xp.isfinite(xp.asarray(values["adversary.s"])) & xp.isfinite(xp.asarray(values["adversary.angle"]))
+    ok = _wrappable(xp, values, values["adversary.s"], values["adversary.angle"])
     ok = ok & _finite_pos(xp, push) & _finite_pos(xp, r) & _finite_pos(xp, h)
     # a step longer than the pusher's radius could carry it across a boundary node unseen
     # (the gap is checked at the ends of a step), and a push as long as the object crushes it
@@ -334,12 +348,16 @@ RULES: tuple[Rule, ...] = (
     Rule("grip.overlap", _r_overlap, f"a fingertip that touches the object only at its grip node at d = 0 "
          f"(overlap of other boundary nodes at most {OVERLAP_TOL:g} * radius)",
          "grip away from re-entrant (concave) corners or use a smaller fingertip radius"),
-    Rule("placement", _r_placement, "finite arc lengths Placement.s [m] and a finite Placement.angle [rad]",
-         "replace NaN/inf positions (s wraps around the boundary: any finite value is a position)"),
-    Rule("adversary", _r_adversary, "a finite Adversary.s [m] and angle [rad], a push [m] > 0 shorter than the "
+    Rule("placement", _r_placement, f"finite arc lengths Placement.s [m] within {MAX_WRAP:,.0f} object sizes of "
+         f"the boundary's start and a finite Placement.angle within {MAX_WRAP:,.0f} rad (both wrap; farther out "
+         "the wrapped value is round-off)",
+         "replace NaN/inf positions; s wraps around the boundary: take a large s modulo the perimeter "
+         "(scene.curve().perimeter) and the angle modulo 2 pi"),
+    Rule("adversary", _r_adversary, f"a finite Adversary.s [m] within {MAX_WRAP:,.0f} object sizes of the "
+         f"boundary's start and a finite angle within {MAX_WRAP:,.0f} rad, a push [m] > 0 shorter than the "
          "object, a radius [m] > 0 and a step [m] > 0 at most the push and the pusher's radius",
          "use a push below the object's size and the default step (None: push / 50, at most the radius), or a "
-         "step below the pusher's radius"),
+         "step below the pusher's radius; take a large s modulo the perimeter and the angle modulo 2 pi"),
 )
 assert tuple(r.field for r in RULES) == FIELDS
 
@@ -394,6 +412,8 @@ def _context(rule: Rule, values) -> str:
         return " (s, angle; " + ", ".join(f"{k.split('.')[1]} {_show(values.get(k))}" for k in
                                 ("adversary.push", "adversary.radius", "adversary.step")) + \
             ("" if values.get("size") is None else f", object size {_show(values['size'])} m") + ")"
+    if f == "placement" and values.get("size") is not None:
+        return f" (object size {_show(values['size'])} m)"
     if f == "grip.overlap" and values.get("fingers.radius") is not None:
         return f" (fingertip radius {_show(values['fingers.radius'])} m)"
     return ""
@@ -412,8 +432,9 @@ def problems(values: dict) -> list[str]:
                 shown = values.get("grip_slots")
             if rule.field == "adversary":
                 shown = (values.get("adversary.s"), values.get("adversary.angle"))
-            out.append(f"{rule.field} = {_show(shown)}{_context(rule, values)}: expected {rule.requirement}; "
-                       f"{rule.fix}.")
+            text = f"{rule.field} = {_show(shown)}" if rule.field != "placement" else \
+                f"placement = s {_show(values['placement.s'])}, angle {_show(values['placement.angle'])}"
+            out.append(f"{text}{_context(rule, values)}: expected {rule.requirement}; {rule.fix}.")
     return out
 
 

@@ -38,7 +38,8 @@ BAD = {
     "grip_slots": [np.array([3, 3]), np.array([-1, 20]), np.array([3, 40]), np.array([1000000, 2])],
     "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]]), np.array([[0.0], [-63.0]])],
     "grip.overlap": [np.array([1.4e-3, -1.0]), np.array([NAN, 0.0])],
-    "placement.s": [np.array([NAN, 0.2]), np.array([0.0, INF])],
+    "placement.s": [np.array([NAN, 0.2]), np.array([0.0, INF]),
+                    np.array([1e15, 0.2]), np.array([0.0, -100.5])],   # beyond 1,000 sizes: wrapping is round-off
     "adversary.push": POS + [0.1, 0.5],           # as long as the object (0.1 m) or longer: it would crush it
 }
 KEY = {f: f for f in V.FIELDS}
@@ -88,7 +89,8 @@ def test_rule_eager_jit_vmap_agree(k, field, bad):
 
 @pytest.mark.parametrize("change", [{"adversary.step": 0.011}, {"adversary.step": 0.004}, {"adversary.step": 1e-300},
                                     {"adversary.step": NAN}, {"adversary.radius": 0.0}, {"adversary.s": NAN},
-                                    {"adversary.angle": INF}], ids=str)
+                                    {"adversary.angle": INF}, {"adversary.s": 1e15}, {"adversary.angle": -1001.0}],
+                         ids=str)
 def test_adversary_step_beyond_its_radius_or_push_is_refused(change):
     """The pusher's step must be at most its radius (a longer step could carry it across a
     boundary node between two gap checks: it passed through the object, SUCCESS with no work)
@@ -97,6 +99,24 @@ def test_adversary_step_beyond_its_radius_or_push_is_refused(change):
     p = V.problems(vals)
     assert len(p) == 1 and p[0].startswith("adversary = ") and "push 0.003, radius" in p[0], p
     assert int(jax.jit(V.invalid_index)(vals)) == V.FIELDS.index("adversary")
+
+
+def test_a_placement_too_far_out_to_wrap_is_refused_with_the_modulo_to_take(square):
+    """Placement.s wraps round the perimeter and the angle round the circle, but wrapping a
+    value X keeps it only to X * eps: s = 1e15 m gave INFEASIBLE_GRIP at a node pair of
+    round-off (a squeeze of noise), 1e308 the same. Up to 1,000 object sizes and 1,000 rad
+    they wrap; beyond, an error says to take the modulo (traced: INVALID_INPUT)."""
+    assert V.problems(dict(GOOD, **{"placement.s": np.array([99.9, -99.9]), "placement.angle": -999.0})) == []
+    far = V.problems(dict(GOOD, **{"placement.angle": 1001.0}))
+    assert len(far) == 1 and far[0].startswith("placement = s [0. , 0.2], angle 1001.0 (object size 0.1 m)"), far
+    placed = _scene(square).replace(grip=None, placement=jsq.Placement(s=(1e15, 0.25)))
+    with pytest.raises(ValueError, match=r"placement = s \[1\.0e\+15, 2\.5e-01\].*modulo the perimeter"):
+        jsq.squeeze(placed)
+    lanes = {"placement.s": jnp.array([[0.0, 0.2], [1e308, 0.2]]), "placement.angle": jnp.array([0.0, 0.0])}
+    rest = {k: v for k, v in GOOD.items() if k not in lanes}
+    out = jax.vmap(lambda s, a: V.invalid_index(dict(rest, **{"placement.s": s, "placement.angle": a})))(
+        lanes["placement.s"], lanes["placement.angle"])
+    assert out.tolist() == [-1, V.FIELDS.index("placement")]
 
 
 def test_a_fingertip_turning_more_than_ten_turns_over_the_squeeze_is_refused():
