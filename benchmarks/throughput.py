@@ -4,7 +4,8 @@ The foam square of ``jaxsqueeze/scenes/foam_square.toml`` (1,265 nodes, m = 122,
 stick/slip, 15 mm, float64), in one run:
 
 * ``squeeze``: one squeeze after compilation (the jitted core ``api._run``, best of ``--reps``;
-  and ``jsq.squeeze`` with its validation and trimming), per squeeze and per recorded row.
+  and ``jsq.squeeze`` with its validation and trimming), per squeeze and per recorded row;
+  the same core in float32 in a fresh process with x64 off.
 * ``reference``: a plain NumPy/SciPy row written here (:func:`numpy_row`: LU of the bordered
   matrix of eq. 4 for the s contacts, Newton on the slip angles with the analytic Jacobian,
   the implicit slip rates, the gaps of every boundary node and the cone margins) on the
@@ -206,8 +207,14 @@ def worker(argv):
         from jaxsqueeze.batch import host_devices_flag
         os.environ["XLA_FLAGS"] = host_devices_flag()
     import jax
-    jax.config.update("jax_enable_x64", True)
-    if kind == "compile":       # compile [CACHE_DIR | plain | fused]
+    jax.config.update("jax_enable_x64", kind != "core32")
+    if kind == "core32":        # core32 REPS: the eager program in float32 (x64 off), best of REPS
+        from jaxsqueeze.simulation import api as G
+        sc, op0, gr, cfg, pos = scene_inputs(eager=True)
+        core = G._run.lower(op0, gr, cfg).compile()
+        t_run, out = best_of(lambda: jax.block_until_ready(core(op0, gr)), int(argv[1]))
+        print(json.dumps(dict(run_s=t_run, rows=int(out[0].count), status=int(out[0].status))), flush=True)
+    elif kind == "compile":       # compile [CACHE_DIR | plain | fused]
         events = {}
         jax.monitoring.register_event_listener(lambda name, **kw: events.__setitem__(name, events.get(name, 0) + 1))
         plain, fused = argv[1:] == ["plain"], argv[1:] == ["fused"]
@@ -363,6 +370,11 @@ def main(argv=None):
     t_sq, _ = best_of(lambda: jsq.squeeze(sc.replace(friction=0.2 + 1e-9 * np.random.rand()), op=op), a.reps)
     rec("squeeze", "jsq.squeeze (incl. validation and trim)", seconds=t_sq, rows=n_rows,
         per_row_ms=1e3 * t_sq / n_rows)
+    got, _ = sub(["core32", a.reps], timeout=300)
+    if got:
+        rec("squeeze", "core in float32 (fresh process, x64 off), best of reps", seconds=got[0]["run_s"],
+            rows=got[0]["rows"], per_row_ms=1e3 * got[0]["run_s"] / got[0]["rows"],
+            note="float32 programs compile without region analysis (compiler.NOT_FLOAT32)")
 
     # ---- the NumPy reference row on a representative recorded row (most sliding contacts): the
     # squeeze is run again with max_steps = k, so its final state is the contact set of row k
