@@ -93,7 +93,7 @@ def options() -> tuple:
     of them (and with each alone when that fails), less :data:`NOT_FLOAT32` where x64 is off
     (the precision of the library's programs); ``()`` off the CPU."""
     opts = _options(platform())
-    if not jax.config.jax_enable_x64:
+    if jax.dtypes.canonicalize_dtype(np.float64) != np.float64:        # x64 off: float32 programs
         opts = tuple(item for item in opts if item[0] not in NOT_FLOAT32)
     return opts
 
