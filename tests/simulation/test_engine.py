@@ -395,3 +395,31 @@ def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
     moved = dataclasses.replace(undone, d_star=st.d + model.h)
     out, accept = chk(model, moved, sol, dsol, st.d + model.h)
     assert bool(accept) and int(out.fault) == engine.RUNNING
+
+
+def test_a_check_pass_past_the_settle_limit_leaves_the_set_unsettled(model, touched):
+    """_hypothesis at an event depth: a free node found inside a fingertip joins there (A), and
+    a contact that pulls peels off (B), while CHECK passes remain; on pass ``SETTLE_ITERS``
+    neither happens and the set is ``unsettled`` (check then stops with STALLED rather than
+    accept a row with a node inside a tip or a contact pulling)."""
+    st = _step(model, touched)                                        # the grip nodes in contact
+    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
+                                              (s.d,), (jnp.ones_like(s.d),)))(model, st)
+    mode = np.asarray(st.nodes.mode)
+    free, held = int(np.flatnonzero(mode == FREE)[0]), int(np.flatnonzero(mode > FREE)[0])
+    sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS * model.gap_tol))
+    pulls = sol._replace(fn=sol.fn.at[held].set(-float(engine.largest(sol.F))))
+    hyp = jax.jit(engine._hypothesis)
+    for checks in (0, engine.SETTLE_ITERS - 1, engine.SETTLE_ITERS):
+        at = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
+                                 added=jnp.full_like(st.added, -1), checks=jnp.asarray(checks, jnp.int32))
+        settle = checks < engine.SETTLE_ITERS
+        new_mode, _, _, changed, unsettled, logged, kinds = hyp(model, at, sunk, dsol)
+        assert (int(new_mode[free]) == STICK) == settle and bool(logged[free]) == settle
+        assert bool(unsettled) != settle and bool(changed) == settle
+        if settle:
+            assert int(kinds[free]) == 0                                # logged as A
+        new_mode, _, _, changed, unsettled, logged, kinds = hyp(model, at, pulls, dsol)
+        assert (int(new_mode[held]) == FREE) == settle and bool(unsettled) != settle
+        if settle:
+            assert int(kinds[held]) == 1                                # logged as B
