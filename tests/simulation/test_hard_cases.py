@@ -438,24 +438,39 @@ F32_SCRIPT = textwrap.dedent("""
     sys.path.insert(0, {here!r})
     import numpy as np
     import jaxsqueeze as jsq
-    from physics import hexagon_scene, nearest, symmetric_square
+    from physics import FLOAT32, check_states, hexagon_scene, nearest, symmetric_square
     mesh = symmetric_square(0.1, 0.008)
     grip = (nearest(mesh, (0, -0.05)), nearest(mesh, (0, 0.05)))
-    out = {{}}
-    for name, E, depth in {cases!r}:
+    out, held = {{}}, {{}}
+
+    def bounded(name, res, mesh, mu, bounds=FLOAT32):     # check_states: "" or what broke
+        try:
+            check_states(res, mesh, mu, bounds=bounds)
+            held[name] = ""
+        except AssertionError as e:
+            held[name] = str(e)
+
+    for name, E, depth, mu in {cases!r} + [("low friction", 1e5, 0.012, 0.2)]:
         mat = jsq.Material(E=E, nu=0.3, thickness=0.0254)
         res = jsq.squeeze(jsq.Scene(mesh=mesh, material=mat, fingers=jsq.Fingers(radius=0.015), grip=grip,
-                                    friction=0.5, depth=depth))
+                                    friction=mu, depth=depth))
         assert res.forces.dtype == np.float32
         out[name] = dict(status=res.outcome.name, F=res.total_force[-1][1].tolist(),
                          events=[[d, k] for d, _, k, _ in res.events.rows()],
                          modes=np.asarray(res.modes[-1]).tolist())
-    res = jsq.squeeze(hexagon_scene())
+        bounded(name, res, mesh, mu)
+    hexagon = hexagon_scene()
+    res = jsq.squeeze(hexagon)
     out["hexagon"] = dict(status=res.outcome.name, depth=float(res.final_depth),
                           events=[[d, n, k] for d, n, k, _ in res.events.rows()])
+    # fingertips of 3 L: a float32 polar angle moves a node by r eps |theta| ~ 1e-6 L along its
+    # tip, which puts its slip force 2.3e-4 of the largest force off the cone's edge
+    bounded("hexagon", res, hexagon.mesh, float(hexagon.friction), FLOAT32._replace(force=5e-4))
+    out["bounds"] = held
     print(json.dumps(out))
 """)
-F32_CASES = [("foam", 1e5, 0.012), ("steel", 2e11, 0.012), ("deep", 1e5, 0.03), ("tiny", 1e5, 1e-6)]
+F32_CASES = [("foam", 1e5, 0.012, 0.5), ("steel", 2e11, 0.012, 0.5), ("deep", 1e5, 0.03, 0.5),
+             ("tiny", 1e5, 1e-6, 0.5)]
 
 
 @pytest.fixture(scope="module")
@@ -480,15 +495,26 @@ def test_a_float32_contact_joining_outside_its_cone_slides_as_in_float64(float32
     assert ["A", "C"] == [k for _, n, k in r32["events"] if n == 30]
 
 
-@pytest.mark.parametrize("name, E, depth", F32_CASES)
-def test_float32_agrees_with_float64(float32_runs, name, E, depth):
+def test_float32_states_hold_the_float32_bounds(float32_runs):
+    """docs/numerics.md §3: check float32 results against float32's bounds
+    (``physics.FLOAT32``: balance 1e-5, contact nodes 2e-6 L off their circle, free nodes 2e-5 L
+    inside a tip, cone and pull 1e-4 of the largest force; 5e-4 with the hexagon's fingertips of
+    3 L, whose polar angles hold a node's place on the tip only to r eps |theta|), which every row
+    of these squeezes holds (the low-friction case is the section's probe of a node that joins
+    sticking and slides 75 µm deeper); float64's (``physics.FLOAT64``) are 100 to 10,000 times tighter."""
+    assert float32_runs["bounds"] == {name: "" for name in float32_runs["bounds"]}
+    assert set(float32_runs["bounds"]) == {c[0] for c in F32_CASES} | {"low friction", "hexagon"}
+
+
+@pytest.mark.parametrize("name, E, depth, mu", F32_CASES)
+def test_float32_agrees_with_float64(float32_runs, name, E, depth, mu):
     """Tolerances of docs/numerics.md: total force 1e-3 relative; event-A depths 1e-4 L (the
     float32 default gap_tol = 1e-5 L delays event A by gap_tol / (dgap/dd)); same final modes.
     float32 may locate a C event just after an A event where float64 lets the new contact slide
     at once, a C at the A's depth (its force is on the cone edge; the hypothesis probe is
     round-off limited in float32)."""
     r32 = float32_runs[name]
-    r64 = squeeze_ok(base_scene(material=jsq.Material(E=E, nu=0.3, thickness=0.0254), depth=depth))
+    r64 = squeeze_ok(base_scene(material=jsq.Material(E=E, nu=0.3, thickness=0.0254), depth=depth, friction=mu))
     F64 = f2(r64)
     rel = np.abs(np.array(r32["F"]) - F64).max() / np.abs(F64).max()
     ev32 = [k for _, k in r32["events"]]
@@ -509,13 +535,17 @@ def test_float32_agrees_with_float64(float32_runs, name, E, depth):
 
 
 FOAM32_SCRIPT = textwrap.dedent("""
-    import json, os
+    import json, os, sys
     import jax
     jax.config.update("jax_enable_x64", False)
+    sys.path.insert(0, os.path.join({root!r}, "tests"))
     import jaxsqueeze as jsq
     from jaxsqueeze.io import scenefile
-    res = jsq.squeeze(scenefile.load(os.path.join({root!r}, "jaxsqueeze", "scenes", "foam_square.toml")).scene)
+    from physics import check_states
+    demo = scenefile.load(os.path.join({root!r}, "jaxsqueeze", "scenes", "foam_square.toml")).scene
+    res = jsq.squeeze(demo)
     assert res.forces.dtype.name == "float32"
+    check_states(res, demo.mesh, float(demo.friction))      # physics.FLOAT32, docs/numerics.md §3
     heart = scenefile.load(os.path.join({root!r}, "jaxsqueeze", "scenes", "heart_band.toml")).scene
     slid = jsq.squeeze(heart.replace(friction_model="frictionless"))
     print(json.dumps(dict(status=res.outcome.name, F=res.total_force[-1].tolist(), events=int(res.n_events),
@@ -528,7 +558,8 @@ def test_float32_demo_squeeze_keeps_its_contact_forces_exact():
     by bordering updates drifts in float32 (3e-4 relative to a fresh inverse at the end, against
     4e-13 in float64), so the float32 solve takes one step of iterative refinement against the
     bordered matrix itself (``contacts._linear``): the final grip force then matches float64 to
-    2e-6 (2e-3 without the refinement), and the two fingers' forces balance."""
+    2e-6 (2e-3 without the refinement), and the two fingers' forces balance; every row holds the float32 bounds of
+    ``physics.check_states``."""
     env = dict(os.environ, JAX_ENABLE_X64="0")
     r = subprocess.run([sys.executable, "-c", FOAM32_SCRIPT.format(root=ROOT)], capture_output=True, text=True,
                        timeout=300, env=env, cwd=ROOT)
