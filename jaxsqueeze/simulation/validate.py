@@ -415,7 +415,8 @@ def _context(rule: Rule, values) -> str:
     if f == "placement" and values.get("size") is not None:
         return f" (object size {_show(values['size'])} m)"
     if f == "grip.overlap" and values.get("fingers.radius") is not None:
-        return f" (fingertip radius {_show(values['fingers.radius'])} m)"
+        return (" (how far [m] fingertip 0 and fingertip 1 reach past another boundary node, > 0 inside "
+                f"the object; fingertip radius {_show(values['fingers.radius'])} m)")
     return ""
 
 
