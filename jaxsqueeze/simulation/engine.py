@@ -108,6 +108,7 @@ class Bracket(NamedTuple):
     dth: jax.Array
     x: jax.Array        # (m, 2) deformed boundary at hi and its rate
     dx: jax.Array
+    fmax: jax.Array     # () the largest contact force at hi: the scale of a pull in the CHECK after it
     iters: jax.Array
 
 
@@ -191,7 +192,7 @@ def init(model: Model) -> State:
     i32 = lambda v: jnp.array(v, jnp.int32)  # noqa: E731
     zero = z((), dt)
     zm, zm2 = z(m, dt), z((m, 2), dt)
-    bracket = Bracket(zm, zero, zero, zm, zm, zm, zm, z(m, jnp.int32), zm, z(S, dt), z(S, dt), zm2, zm2, i32(0))
+    bracket = Bracket(zm, zero, zero, zm, zm, zm, zm, z(m, jnp.int32), zm, z(S, dt), z(S, dt), zm2, zm2, zero, i32(0))
     fault = jnp.where(model.invalid >= 0, Status.INVALID_INPUT, jnp.where(model.margin < 0, Status.INFEASIBLE_GRIP, RUNNING))
     return State(
         d=zero, nodes=nodes, slots=contacts.pair(op, S, i, j), angle=theta, F=zm2, u=zm2, g=z(3, dt), e=zm, de=zm,
@@ -347,7 +348,7 @@ def advance(model: Model, st: State, sol: Solution, dsol: Solution, d1):
     floor = jnp.minimum(st.e, 0.0)
     crossed = jnp.any(sol.e < floor)
     b = Bracket(floor, st.d, d1, st.e - floor, st.de, sol.e - floor, dsol.e, sol.kind, sol.ft, sol.th, dsol.th,
-                model.op.points + sol.u, dsol.u, jnp.array(0, jnp.int32))
+                model.op.points + sol.u, dsol.u, largest(sol.F), jnp.array(0, jnp.int32))
     s = st.stats
     inf = jnp.full_like(st.d, jnp.inf)
     opened = _with(st, bracket=b, phase=jnp.array(LOCATE, jnp.int32), stats=s._replace(events=s.events + 1),
@@ -460,8 +461,8 @@ def locate_event(model: Model, st: State, sol: Solution, dsol: Solution, dm) -> 
     e = sol.e - b.floor
     hit = jnp.any(e < 0)
     sel = lambda new, old: jax.tree.map(lambda a, c: jnp.where(hit, a, c), new, old)  # noqa: E731
-    hi_part = sel((dm, e, dsol.e, sol.kind, sol.ft, sol.th, dsol.th, model.op.points + sol.u, dsol.u),
-                  (b.hi, b.e_hi, b.de_hi, b.kind, b.ft, b.th, b.dth, b.x, b.dx))
+    hi_part = sel((dm, e, dsol.e, sol.kind, sol.ft, sol.th, dsol.th, model.op.points + sol.u, dsol.u, largest(sol.F)),
+                  (b.hi, b.e_hi, b.de_hi, b.kind, b.ft, b.th, b.dth, b.x, b.dx, b.fmax))
     lo_part = jax.tree.map(lambda a, c: jnp.where(hit, c, a), (dm, e, dsol.e), (b.lo, b.e_lo, b.de_lo))
     b = Bracket(b.floor, lo_part[0], hi_part[0], lo_part[1], lo_part[2], *hi_part[1:], b.iters + 1)
     return _with(st, bracket=b, stats=st.stats._replace(bracket_iters=st.stats.bracket_iters + 1))
@@ -637,9 +638,13 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # located to event_tol); while it is being pressed harder (its force's rate positive) and
     # its pull is what that rate makes up within event_tol, it is joining, not peeling: letting
     # it go would only make the same A event again at d*. A larger pull (other contacts let go
-    # at d*) is a peel
+    # at d*) is a peel. The share is of the largest force of this trial or, if larger, of the
+    # set before the event at the bracket's crossed end: a trial set that carries nothing (the
+    # sliding point contact of a two-point grasp lets the object go) has forces of round-off
+    # size, and their signs are no pull (they made a SLIP_FAILURE a LOST_CONTACT by chance)
     joining = (st.added >= 0) & (dsol.fn > 0) & (sol.fn + model.ev_tol * dsol.fn >= 0)
-    peeling = on & ~joining & ~flip & (sol.fn < -share * largest(sol.F)) & jnp.all(held > 0)
+    scale = jnp.maximum(largest(sol.F), st.bracket.fmax)
+    peeling = on & ~joining & ~flip & (sol.fn < -share * scale) & jnp.all(held > 0)
     peeled = peeling & (st.checks < SETTLE_ITERS)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled

@@ -176,7 +176,7 @@ def test_the_bracket_estimate_finds_the_root_of_a_cubic_from_its_ends():
     de = lambda d: -(1.0 + 3.0 * (d - 0.4) ** 2) - 6.0 * (d - roots) * (d - 0.4)  # noqa: E731
     z = jnp.zeros(3)
     b = engine.Bracket(z, jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(e(lo)), jnp.asarray(de(lo)),
-                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z,
+                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z, jnp.zeros(()),
                        jnp.asarray(0, jnp.int32))
     np.testing.assert_allclose(np.asarray(engine._hermite_root(b)), roots, rtol=0, atol=1e-12)
     # a function already below zero at lo, or still above it at hi, has no crossing to estimate
@@ -197,7 +197,7 @@ def test_a_dip_below_zero_inside_a_step_is_found_from_its_ends():
     de = lambda d: np.array([2 * (d - c), 2 * (d - c), -1.0])            # noqa: E731  the third falls at hi
     z = jnp.zeros(3)
     b = engine.Bracket(z, jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(e(lo)), jnp.asarray(de(lo)),
-                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z,
+                       jnp.asarray(e(hi)), jnp.asarray(de(hi)), jnp.zeros(3, jnp.int32), z, z, z, z, z, jnp.zeros(()),
                        jnp.asarray(0, jnp.int32))
     dip, deepest = engine._dip(b, 1e-3)
     assert np.asarray(dip).tolist() == [True, False, False]

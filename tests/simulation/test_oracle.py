@@ -242,6 +242,30 @@ def test_point_contacts_match_the_oracle(meshes, name):
     assert np.count_nonzero(o.modes) == (1 if outcome == "LOST_CONTACT" else 2)
 
 
+def test_a_sliding_point_contact_that_carries_nothing_fails_by_slip():
+    """A two-point grasp holds only forces along the segment between its contacts (force and
+    torque balance). Finger 1's tip (3 L across) turns and drags its stuck contact until the
+    force leaves the cone (C at 0.50 mm); sliding, the contact can hold no force on its cone's
+    edge, so the trial set carries nothing: every force is round-off (~1e-16 N). The grasp
+    fails by slip there, as in the oracle. The peel rule judged those round-off forces by
+    their own size and let both contacts go by the sign of the round-off: LOST_CONTACT, or
+    SLIP_FAILURE, by chance (a finer mesh of the same triangle: C B B at 0.039 mm)."""
+    mesh = jsq.shapes.polygon([(0, 0), (0.09, 0.01), (0.03, 0.07)], max_edge=0.02)     # 17 nodes
+    P = np.asarray(mesh.points) + np.asarray(mesh.offset)
+    grip = tuple(int(np.argmin(np.linalg.norm(P - xy, axis=1))) for xy in ((0.024375, 0.056875), (0.09, 0.01)))
+    rotation = [[0.0, 0.0], [-35.24, 0.0]]
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=-0.9, thickness=H),
+                      fingers=jsq.Fingers(radius=0.27, rotation=rotation), grip=grip, friction=0.3,
+                      depth=0.0072, contact="point")
+    res = jsq.squeeze(scene)
+    o = from_mesh(mesh, E, -0.9, H, 0.27, grip, 0.3, 0.0072, contact="point", rotation=rotation, step=0.00072)
+    assert res.outcome.name == o.status == "SLIP_FAILURE"
+    L = float(np.ptp(mesh.points, axis=0).max())
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L and 4e-4 < o.final_depth < 6e-4
+    _agree(res, o, L, "C")
+    assert np.abs(np.asarray(res.final_forces)).max() < 1e-12 * np.abs(np.asarray(res.finger_forces)).max()
+
+
 # (mu, s [m], push [m], angle, outcome, push events' kinds); grip (7, 27), r = 20 mm, depth 10 mm
 PUSH = {
     "mu=0.5 push 3 mm along the normal (A; a new contact slides: C)":
