@@ -65,9 +65,12 @@ class Fingers:
                              "polynomial coefficients [rad] of shape (2, k)")
         if self.rotation is not None and numeric(self.rotation):
             rot = np.asarray(self.rotation, float)
-            if rot.ndim != 2 or rot.shape[0] != 2 or not np.all(np.isfinite(rot)):
+            if rot.ndim != 2 or rot.shape[0] != 2:
                 raise ValueError("Fingers.rotation must be finite polynomial coefficients of shape (2, k): "
                                  f"one row per finger, highest power first; got shape {rot.shape}.")
+            if not np.all(np.isfinite(rot)):
+                raise ValueError(f"Fingers.rotation = {rot.tolist()!r:.80} holds NaN or infinite coefficients: "
+                                 "give finite ones [rad / m^k] (zeros for a tip that does not turn).")
 
 
 @jax.tree_util.register_dataclass

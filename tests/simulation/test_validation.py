@@ -390,6 +390,13 @@ def test_a_rotation_of_complex_text_or_boolean_coefficients_is_named(rotation):
         jsq.Fingers(radius=0.01, rotation=rotation)
 
 
+@pytest.mark.parametrize("rotation", [[[np.nan, 0.0], [0.0, 0.0]], [[0.0], [np.inf]]])
+def test_a_rotation_with_nan_or_infinite_coefficients_says_so(rotation):
+    """(it said "must be ... of shape (2, k) ...; got shape (2, 2)", pointing at a right shape)"""
+    with pytest.raises(ValueError, match=r"Fingers.rotation = \[\[.*\]\] holds NaN or infinite coefficients"):
+        jsq.Fingers(radius=0.01, rotation=rotation)
+
+
 def test_a_grip_of_integers_of_mixed_numpy_kinds_is_taken(square):
     """numpy promotes int64 with uint64 to float64: the grip was refused as "must be two integer
     boundary node indices" though both are integers."""
