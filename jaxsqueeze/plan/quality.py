@@ -45,12 +45,21 @@ from ..simulation.result import SqueezeResult, norm
 from ..tracing import is_concrete
 
 
+def _check_result(res, name: str):
+    """A quality takes what :func:`jaxsqueeze.squeeze` returns; anything else (a scene passed
+    for its squeeze, a dict) is a TypeError that says so, not an error deep inside."""
+    if not isinstance(res, SqueezeResult):
+        hint = f": squeeze it first, {name}(jsq.squeeze(scene))" if type(res).__name__ == "Scene" else ""
+        raise TypeError(f"{name} takes a SqueezeResult (what jsq.squeeze returns), got {type(res).__name__}{hint}")
+
+
 def per_result(fn):
     """``fn`` of one result, mapped (``jax.vmap``) over a batched one: a result of
     ``jax.vmap(squeeze)`` (``depth`` of shape (B, k)) gives one value per member, (B, ...).
     Other arguments are shared by the members."""
     @functools.wraps(fn)
     def wrapped(res, *args, **kwargs):
+        _check_result(res, fn.__name__)
         if jnp.ndim(res.depth) == 2:
             return jax.vmap(lambda r: fn(r, *args, **kwargs))(res)
         return fn(res, *args, **kwargs)
@@ -104,6 +113,7 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01, scene=None):
     contact slides: margin 0), whatever ``friction`` says (μ measured a full-stick map against
     cones the squeeze never applied: margins down to −0.77).
     """
+    _check_result(res, "slip_margin")
     if is_concrete(tau):
         positive(tau, "slip_margin's tau (the smooth minimum's temperature)")
     model = getattr(scene, "friction_model", "coulomb")

@@ -115,6 +115,18 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     assert api._run._cache_size() == before
 
 
+@pytest.mark.parametrize("name", ["squeeze_work", "grip_force", "slip_margin", "adversary_work", "finger_work",
+                                  "failure_push"])
+def test_a_quality_given_a_scene_or_other_object_says_it_takes_a_result(square, name):
+    """(a scene passed for its squeeze reached an IndexError, a string an AttributeError)"""
+    fn = getattr(Q, name)
+    args = (0.5,) if name == "slip_margin" else ()
+    with pytest.raises(TypeError, match=rf"{name} takes a SqueezeResult .*got Scene: squeeze it first"):
+        fn(square, *args)
+    with pytest.raises(TypeError, match=rf"{name} takes a SqueezeResult .*got dict$"):
+        fn({"depth": 0.01}, *args)
+
+
 def test_a_quality_that_is_not_one_finite_number_is_named():
     """A quality function returning a vector or a string failed deep in a map (or broadcast
     the summary); one returning NaN at successful squeezes ended a search with "no start
