@@ -519,9 +519,9 @@ def read_mesh(path) -> Mesh:
     pts = np.asarray(m.points, dtype=np.float64)
     if pts.ndim == 2 and pts.shape[1] == 3:
         xy = pts[:, :2]
-        finite = xy[np.all(np.isfinite(xy), axis=1)]
-        scale = float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
-        bad = np.flatnonzero(~(np.abs(pts[:, 2]) <= 1e-9 * max(scale, 1e-300)))     # NaN z too
+        ok = np.all(np.isfinite(xy), axis=1)         # a node NaN in x or y: from_arrays names it
+        scale = float(np.ptp(xy[ok], axis=0).max()) if ok.any() else 0.0
+        bad = np.flatnonzero(ok & ~(np.abs(pts[:, 2]) <= 1e-9 * max(scale, 1e-300)))     # NaN z too
         if bad.size:
             raise ValueError(f"mesh in {path} is not planar: nodes {_few(bad)} have z = "
                              f"{_few(pts[bad, 2])} (must be 0); jaxsqueeze needs meshes in the z = 0 plane")

@@ -450,6 +450,11 @@ def test_read_errors(tmp_path):
     meshio.write(path, meshio.Mesh(pts3 + [[0, 0, 0], [0, 0, np.nan], [0, 0, 0]], [("triangle", np.array([[0, 1, 2]]))]))
     with pytest.raises(ValueError, match=r"not planar: nodes 1"):
         read_mesh(path)
+    path = tmp_path / "nan_node.vtu"                 # a node NaN in x, y and z: named as not finite, not as off-plane
+    meshio.write(path, meshio.Mesh(pts3 + [[0, 0, 0], [np.nan, np.nan, np.nan], [0, 0, 0]], [("triangle", np.array([[0, 1, 2]]))]))
+    with pytest.raises(ValueError, match=r"non-finite \(NaN or inf\) coordinates at nodes 1: \[nan, nan\]") as err:
+        read_mesh(path)
+    assert "planar" not in str(err.value)
     with pytest.raises(ValueError, match=r"points must be real numbers \[m\]; got dtype <U3"):
         Mesh.from_arrays("abc", [[0, 1, 2]])
     with pytest.raises(ValueError, match=r"points must be an array of real numbers \[m\]; got \[\[0, 0\], \[1\]"):
