@@ -211,9 +211,48 @@ REVERSE_MODE = (
     "per input), e.g. jax.jacfwd(loss)(params) in place of jax.grad(loss)(params).")
 
 
+SECOND_ORDER = (
+    "jsq.squeeze gives exact first derivatives only (jax.jvp, jax.jacfwd): the slip angles and the event "
+    "depths carry their derivatives by one implicit-function step, exact to first order, so a second "
+    "derivative by nested forward mode (jax.jacfwd of jax.jacfwd, a jvp inside a jvp) would be "
+    "wrong (0.5 % on a sliding square). For a second derivative take central differences of jax.jacfwd, "
+    "e.g. (g(p + h) - g(p - h)) / (2 * h) with g = jax.jacfwd(loss) and h ~ 1e-6 * p in float64.")
+
+
+@jax.custom_jvp
+def _no_second_order(xs):
+    return xs
+
+
+@_no_second_order.defjvp
+def _(primals, tangents):
+    raise TypeError(SECOND_ORDER)
+
+
+@jax.custom_jvp
+def _first_order_only(xs):
+    """``xs`` (a tuple of arrays) unchanged. Its derivative passes the tangents on, but its
+    primal output there is :func:`_no_second_order`, whose derivative raises: a second
+    forward-mode level over the squeeze's inputs, also one staged through a user's ``jit``
+    (where :func:`squeeze` sees no tracers of its own), is refused while it is traced.
+    Symbolic zeros keep the inputs that carry no tangent out of the derivative program."""
+    return xs
+
+
+def _pass_tangents(primals, tangents):
+    return _no_second_order(*primals), tangents[0]
+
+
+_first_order_only.defjvp(_pass_tangents, symbolic_zeros=True)
+
+
 @compiler.jit(static_argnames=("cfg",))
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
+    leaves, tree = jax.tree.flatten((op, grasp))
+    real = {k for k, x in enumerate(leaves) if jnp.issubdtype(jnp.result_type(x), jnp.inexact)}
+    guarded = iter(_first_order_only(tuple(leaves[k] for k in sorted(real))))
+    op, grasp = jax.tree.unflatten(tree, [next(guarded) if k in real else x for k, x in enumerate(leaves)])
     st = batched_simulate(op, grasp, cfg)
     return to_result(st, op, grasp), st.F.reshape(-1), st.g
 
@@ -240,7 +279,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     out, squeezes again with more (:class:`Settings`). A second call with new numbers (grip,
     friction, depth, radius, material, tolerances) reuses the compiled program. Works under ``jax.jit``,
     ``jax.vmap`` and forward-mode differentiation (``jax.jvp``/``jax.jacfwd``) over every
-    number of the scene (E, ν, thickness, μ, radius, depth, rotation coefficients).
+    number of the scene (E, ν, thickness, μ, radius, depth, rotation coefficients): exact
+    first derivatives; nested forward mode (a second derivative) raises ``TypeError``.
     Eagerly, invalid input raises ``ValueError`` naming every bad field; under tracing it
     gives ``Status.INVALID_INPUT`` with ``result.invalid`` naming the field.
     """
