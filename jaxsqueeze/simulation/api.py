@@ -250,9 +250,9 @@ _first_order_only.defjvp(_pass_tangents, symbolic_zeros=True)
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
     leaves, tree = jax.tree.flatten((op, grasp))
-    real = {k for k, x in enumerate(leaves) if jnp.issubdtype(jnp.result_type(x), jnp.inexact)}
-    guarded = iter(_first_order_only(tuple(leaves[k] for k in sorted(real))))
-    op, grasp = jax.tree.unflatten(tree, [next(guarded) if k in real else x for k, x in enumerate(leaves)])
+    real = [jnp.issubdtype(jnp.result_type(x), jnp.inexact) for x in leaves]
+    guarded = iter(_first_order_only(tuple(x for x, r in zip(leaves, real) if r)))
+    op, grasp = jax.tree.unflatten(tree, [next(guarded) if r else x for x, r in zip(leaves, real)])
     st = batched_simulate(op, grasp, cfg)
     return to_result(st, op, grasp), st.F.reshape(-1), st.g
 
