@@ -63,6 +63,24 @@ def differentiated(x) -> bool:
     return _any_tracer(x, lambda t: type(t).__name__ == "JVPTracer")
 
 
+def forward_levels(x) -> int:
+    """How many forward-mode differentiations (``jax.jvp``/``jax.jacfwd`` traces) the leaves of
+    ``x`` carry tangents of, through ``vmap``/``jit`` tracers around them: 2 or more is a
+    second derivative (read from the tracers' class names, as :func:`reverse_mode`)."""
+    traces = set()
+
+    def walk(t, depth=0):
+        if not isinstance(t, jax.core.Tracer) or depth > 8:
+            return
+        if type(t).__name__ == "JVPTracer":
+            traces.add(id(getattr(t, "_trace", t)))
+        for a in ("val", "primal"):
+            walk(getattr(t, a, None), depth + 1)
+    for v in jax.tree.leaves(x):
+        walk(v)
+    return len(traces)
+
+
 def numeric(x) -> bool:
     """True for a concrete number or array of numbers (what eager validation can check).
 

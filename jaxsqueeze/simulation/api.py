@@ -17,7 +17,7 @@ from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..tracing import as_array, differentiated, is_concrete, reverse_mode
+from ..tracing import as_array, differentiated, forward_levels, is_concrete, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
 from .scene import Scene, stiffness_of
@@ -287,6 +287,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     check_types(scene, op)
     if reverse_mode((scene, op)):
         raise TypeError(REVERSE_MODE)
+    if forward_levels((scene, op)) > 1:      # (through a user's jit: _first_order_only, in _run)
+        raise TypeError(SECOND_ORDER)
     concrete = is_concrete(scene)
     if throw and not concrete:
         raise ValueError("throw=True raises on the status, which is traced under jax.jit, vmap and jacfwd: "

@@ -552,10 +552,10 @@ def test_reverse_mode_is_refused_with_the_way_to_a_gradient(slanted):
 
 def test_a_second_derivative_is_refused_with_the_way_to_it(slanted):
     """README: derivatives are exact to first order. Nested forward mode (jax.jacfwd of
-    jax.jacfwd, a jvp inside a jvp, also through the user's own jit) raises a TypeError while
-    tracing that says so and names central differences of jax.jacfwd, instead of returning a
-    second derivative that the implicit-function steps get wrong (0.5 % on a sliding square,
-    docs/numerics.md §2)."""
+    jax.jacfwd, a jvp inside a jvp, also through the user's own jit) raises a TypeError that
+    says so and names central differences of jax.jacfwd, instead of returning a second
+    derivative that the implicit-function steps get wrong (0.5 % on a sliding square,
+    docs/numerics.md §2): at the front door, or (through a jit) while the jvp is traced."""
     force = lambda mu, d: jsq.squeeze(slanted.replace(friction=mu, depth=d)).grip_force  # noqa: E731
     attempts = [lambda: jax.jacfwd(jax.jacfwd(force, argnums=1), argnums=1)(0.23, 0.012),
                 lambda: jax.jvp(lambda d: jax.jvp(lambda mu: force(mu, d), (0.23,), (1.0,))[1], (0.012,), (1.0,)),
