@@ -437,7 +437,11 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d):
                 R = R - w * (g @ H)
                 J = J - w[:, None] * (H.T @ H + jnp.diag(g @ jnp.einsum("gkb,kb->gk", Ks, d2p)))
             R = jnp.where(mask, R, x - take(v.theta0))
-            return R, jnp.where(mask[:, None], J, 0.0) + jnp.diag(jnp.where(mask, 0.0, 1.0))
+            # R depends on the unknowns of ``mask`` only (the other slots take θ0, not x): the
+            # Jacobian's other columns are zero. Left in, a slot that sticks at an anchor carrying
+            # a tangent added its effect on R a second time in the implicit step (dθ/dμ 7 % off)
+            both = mask[:, None] & mask[None, :]
+            return R, jnp.where(both, J, 0.0) + jnp.diag(jnp.where(mask, 0.0, 1.0))
 
         Psel = _block_form(sl, sel)
         args = (model, sl, v, d, Psel, K, eps, (sel, mask, back, on))

@@ -550,6 +550,27 @@ def test_reverse_mode_is_refused_with_the_way_to_a_gradient(slanted):
             jax.grad(wrap(force))(0.3)
 
 
+def test_jacfwd_holds_where_an_anchor_that_moves_with_mu_sticks_beside_sliding_contacts():
+    """A contact that sticks at an anchor which μ moves (it stuck by event D at a depth that μ
+    moves) beside contacts that slide. The slip angles' implicit step took the Jacobian's
+    columns of every slot, though a sticking slot's angle is its anchor, not an unknown, and so
+    counted the anchor's tangent twice: dF/dμ 7 % off central differences on this 10 mm
+    rectangle (numerics §2, 19). Found by random scenes with turning tips, μ = 2, ν = 0.49."""
+    mesh = jsq.shapes.rectangle(0.08, 0.05, max_edge=0.01)
+    grip = (nearest(mesh, (-0.03, -0.025)), nearest(mesh, (0.02, 0.025)))
+    sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.49, thickness=0.0254), friction=2.0, depth=0.0032,
+                   fingers=jsq.Fingers(radius=0.24, rotation=[[0.0, 0.0], [-14.65, 0.03]]), grip=grip,
+                   settings=jsq.Settings(capacity=8, sliding_capacity=8))     # one 8 x 8 slip-angle system
+    res = jsq.squeeze(sc)
+    assert res.outcome == jsq.Status.SUCCESS
+    assert [k for _, _, k, _ in res.events.rows()][-1] == "D"
+    check_states(res, mesh, 2.0, "coulomb")
+    force = lambda mu: jsq.squeeze(sc.replace(friction=mu)).grip_force  # noqa: E731
+    h = 2e-6
+    fd = (float(force(2.0 + h)) - float(force(2.0 - h))) / (2 * h)
+    np.testing.assert_allclose(float(jax.jacfwd(force)(2.0)), fd, rtol=1e-6)
+
+
 def test_a_second_derivative_is_refused_with_the_way_to_it(slanted):
     """README: derivatives are exact to first order. Nested forward mode (jax.jacfwd of
     jax.jacfwd, a jvp inside a jvp, also through the user's own jit) raises a TypeError that
