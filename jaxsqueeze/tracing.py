@@ -66,14 +66,18 @@ def differentiated(x) -> bool:
 def forward_levels(x) -> int:
     """How many forward-mode differentiations (``jax.jvp``/``jax.jacfwd`` traces) the leaves of
     ``x`` carry tangents of, through ``vmap``/``jit`` tracers around them: 2 or more is a
-    second derivative (read from the tracers' class names, as :func:`reverse_mode`)."""
+    second derivative (read from the tracers' class names, as :func:`reverse_mode`; a JAX
+    whose tracers do not name their trace counts 0, and the squeeze's own derivative rule
+    still refuses a second derivative)."""
     traces = set()
 
     def walk(t, depth=0):
         if not isinstance(t, jax.core.Tracer) or depth > 8:
             return
-        if type(t).__name__ == "JVPTracer":
-            traces.add(id(getattr(t, "_trace", t)))
+        trace = getattr(t, "_trace", None)
+        level = getattr(trace, "tag", None) or getattr(trace, "main", None)     # (JAX >= 0.4.36; older)
+        if type(t).__name__ == "JVPTracer" and level is not None:
+            traces.add(id(level))
         for a in ("val", "primal"):
             walk(getattr(t, a, None), depth + 1)
     for v in jax.tree.leaves(x):
