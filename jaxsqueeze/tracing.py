@@ -71,17 +71,13 @@ def forward_levels(x) -> int:
     still refuses a second derivative)."""
     traces = set()
 
-    def walk(t, depth=0):
-        if not isinstance(t, jax.core.Tracer) or depth > 8:
-            return
+    def count(t) -> bool:
         trace = getattr(t, "_trace", None)
         level = getattr(trace, "tag", None) or getattr(trace, "main", None)     # (JAX >= 0.4.36; older)
         if type(t).__name__ == "JVPTracer" and level is not None:
             traces.add(id(level))
-        for a in ("val", "primal"):
-            walk(getattr(t, a, None), depth + 1)
-    for v in jax.tree.leaves(x):
-        walk(v)
+        return False                  # walk every leaf and everything it wraps
+    _any_tracer(x, count)
     return len(traces)
 
 
