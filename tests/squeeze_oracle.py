@@ -598,6 +598,10 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
     return out
 
 
+#: a contact pulling by more than this share of the largest force right after an event pass lets go there
+PULL = 1e-8
+
+
 def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, max_events):
     """One loading phase from load d to D (scaled): steps, event location by bisection, events
     applied, new contacts' hypotheses, D at an event depth. Returns (cfg, st, status, d, events,
@@ -613,27 +617,31 @@ def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, ma
         rows.append(dict(d=d, tot=tot, C=st["C"].copy()))
 
     guard = 0
+    pulled = []     # contacts that pull in the set an event pass left: they let go at that depth
     while status == "SUCCESS" and d < D * (1 - 1e-14):
-        d1 = min(d + h, D)
-        guess = {k: th for k, th in zip(st["keys"], st["theta"])}
-        st1 = sq.solve(cfg, d1, guess)
-        trig = sq.triggers(cfg, st1, gap_tol, ftol * _fscale(st1), rtol)
-        if not trig:
-            d, st = d1, st1
-            _arm(cfg, st, rtol)
-            _update_angles(cfg, st)
-            record(d, st)
-            continue
-        lo, hi = d, d1
-        st_hi = st1
-        while hi - lo > depth_tol:
-            mid = 0.5 * (lo + hi)
-            sm = sq.solve(cfg, mid, guess)
-            if sq.triggers(cfg, sm, gap_tol, ftol * _fscale(sm), rtol):
-                hi, st_hi = mid, sm
-            else:
-                lo = mid
-        trig = sq.triggers(cfg, st_hi, gap_tol, ftol * _fscale(st_hi), rtol)
+        if pulled:
+            trig, st_hi, hi = pulled, st, d
+        else:
+            d1 = min(d + h, D)
+            guess = {k: th for k, th in zip(st["keys"], st["theta"])}
+            st1 = sq.solve(cfg, d1, guess)
+            trig = sq.triggers(cfg, st1, gap_tol, ftol * _fscale(st1), rtol)
+            if not trig:
+                d, st = d1, st1
+                _arm(cfg, st, rtol)
+                _update_angles(cfg, st)
+                record(d, st)
+                continue
+            lo, hi = d, d1
+            st_hi = st1
+            while hi - lo > depth_tol:
+                mid = 0.5 * (lo + hi)
+                sm = sq.solve(cfg, mid, guess)
+                if sq.triggers(cfg, sm, gap_tol, ftol * _fscale(sm), rtol):
+                    hi, st_hi = mid, sm
+                else:
+                    lo = mid
+            trig = sq.triggers(cfg, st_hi, gap_tol, ftol * _fscale(st_hi), rtol)
         d = hi
         _update_angles(cfg, st_hi)
         new = set()
@@ -686,6 +694,11 @@ def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, ma
                 c.angle = float(st["theta"][a])
                 st = sq.solve(cfg, d)
                 status = _failure(sq, cfg)
+        # a contact that pulls in the new set by more than round-off (a release that loaded it
+        # into tension) lets go here, with the nodes that sink meanwhile, at this depth, not at
+        # the next step's end, where its force may have recovered
+        now = sq.triggers(cfg, st, gap_tol, ftol * _fscale(st), rtol) if status == "SUCCESS" else []
+        pulled = [t for t in now if t[0] in "AB"] if any(t[0] == "B" and t[3] < -PULL * _fscale(st) for t in now) else []
         record(d, st)
         guard += 1
         if guard > max_events:

@@ -424,6 +424,28 @@ def test_full_stick_nodes_left_inside_a_tip_match_the_oracle(holed_quad, name):
             assert np.all(gap[np.asarray(res.modes[r]) == 0] > -10 * 1e-9 * L), r
 
 
+def test_a_contact_a_cascade_leaves_pulling_lets_go_at_its_depth():
+    """Full stick on a rectangle 80 x 50 mm (5 mm edges), nu = 0.49, r = 40 mm, grip nodes 29
+    and 44, tips not turning. At 9.528 mm node 28 lets go and finger 0's contact rolls from
+    nodes 27-28 to 29-30 in eight events at one depth; the set they leave has node 46 on finger
+    1 pulling (2 % of the largest force): it lets go there (B) and touches again at 9.737 mm (A).
+    The oracle tested its events only at its next step's end, where 46 pushed again, and kept
+    it (end forces 1.5e-3 apart); it now lets such a contact go at the depth, as the engine's
+    peel rule does (random full-stick scene, 2026-12-05)."""
+    mesh = jsq.shapes.rectangle(0.08, 0.05, max_edge=0.005)
+    _, res, o, L = _turning(mesh, 0.49, 0.04, (29, 44), None, 0.012, None, model="stick")
+    assert res.outcome.name == o.status == "SUCCESS"
+    _agree(res, o, L, "AAAABAAAAABBBBBAA")     # one depth's events sorted by kind
+    rows = res.events.rows()
+    d0 = [d for d, n, k, f in rows if (k, n) == ("B", 28)][0]
+    assert abs(d0 - 9.528203e-3) <= 1e-9
+    cascade = [(k, n, f) for d, n, k, f in rows if abs(d - d0) <= 1e-9 * L]
+    assert len(cascade) == 9 and cascade[-1] == ("B", 46, 1)
+    after = [(k, n, round(d * 1e3, 3)) for d, n, k, f in rows if d > d0 + 1e-9 * L]
+    assert after[0] == ("A", 46, 9.737)
+    check_states(res, mesh, 0.5, "stick")
+
+
 def test_a_rejected_contact_set_arms_no_sliding_node(pulling_meshes):
     """Node 28 slides with an inconsistent rate (a jam, unarmed) when node 3 joins at 2.029 mm
     and slides (A, C). The engine's first pass solves the set with node 3 sticking, where 28's
