@@ -111,6 +111,9 @@ def test_small_friction_ends_in_slip_failure():
     res = jsq.squeeze(scene)
     assert res.outcome == jsq.Status.SLIP_FAILURE
     assert res.final_depth < 0.01
+    # README: throw=True raises RuntimeError with advice unless the squeeze reached its depth
+    with pytest.raises(RuntimeError, match=rf"squeeze ended with SLIP_FAILURE at depth {float(res.final_depth):.6g} m: "):
+        jsq.squeeze(scene, throw=True)
     last, fg = np.asarray(res.modes[-1]), np.asarray(res.finger[-1])
     assert any(np.all(last[(last > 0) & (fg == f)] >= 2) for f in (0, 1))
     check_states(res, disk, 0.178)
@@ -311,11 +314,19 @@ def test_event_depth_carries_its_derivative(slanted):
     np.testing.assert_allclose(dd, fd, rtol=1e-4)
 
 
-def test_second_call_does_not_recompile(slanted):
+def test_second_call_does_not_recompile(mesh, slanted):
+    """README: every number of a scene is a leaf, so a changed number never recompiles: the
+    grip, friction, depth, radius, material and the tolerances of Settings."""
     jsq.squeeze(slanted)
     before = grasp_mod._run._cache_size()
-    jsq.squeeze(slanted.replace(friction=0.4, depth=0.01, fingers=jsq.Fingers(radius=0.02)))
-    assert grasp_mod._run._cache_size() == before
+    other = (nearest(mesh, (0.004, -0.05)), nearest(mesh, (-0.004, 0.05)))
+    for changed in (slanted.replace(friction=0.4, depth=0.01, fingers=jsq.Fingers(radius=0.02)),
+                    slanted.replace(grip=other),
+                    slanted.replace(material=jsq.Material(E=3e5, nu=0.3, thickness=0.01)),
+                    slanted.replace(settings=jsq.Settings(step=0.0004, event_tol=1e-8, newton_tol=1e-11,
+                                                          gap_tol=1e-9))):
+        assert jsq.squeeze(changed).outcome in (jsq.Status.SUCCESS, jsq.Status.SLIP_FAILURE)
+        assert grasp_mod._run._cache_size() == before
 
 
 def test_a_second_eager_squeeze_compiles_nothing(slanted):
@@ -382,6 +393,28 @@ def test_fused_batch_inside_the_librarys_top_level_program(slanted):
     h = 1e-6       # central difference of eager squeezes (the usual program, compiled above)
     fd = [float(jsq.squeeze(plain.replace(friction=0.23 + k * h), op=op).grip_force) for k in (1, -1)]
     np.testing.assert_allclose(slope, (fd[0] - fd[1]) / (2 * h), rtol=1e-6)
+
+
+def test_batch_lanes_report_an_infeasible_grip_and_an_overflow(slanted):
+    """README: under vmap a grip outside the friction cones is INFEASIBLE_GRIP (eagerly a
+    ValueError before tracing), and with fixed capacities a member that outgrows them reports
+    OVERFLOW while the others run; each lane is its eager squeeze. The grip is 11.3° off the
+    normals (μ = 0.1 allows 5.7°); 4 slots hold the first 4.4 mm, then 6 contacts join."""
+    small = slanted.replace(settings=jsq.Settings(capacity=4))
+    mus, depths = jnp.array([0.23, 0.1, 0.23]), jnp.array([0.002, 0.002, 0.012])
+    out = jax.vmap(lambda mu, d: jsq.squeeze(small.replace(friction=mu, depth=d)))(mus, depths)
+    S = jsq.Status
+    assert [S(int(v)) for v in out.status] == [S.SUCCESS, S.INFEASIBLE_GRIP, S.OVERFLOW]
+    assert float(out.margin[1]) < 0 and float(out.final_depth[1]) == 0
+    assert np.all(np.asarray(out.forces)[1] == 0)
+    with pytest.raises(ValueError, match="but the friction cones only allow 5.711°"):
+        jsq.squeeze(small.replace(friction=0.1, depth=0.002))
+    for k in (0, 2):
+        eager = jsq.squeeze(small.replace(friction=float(mus[k]), depth=float(depths[k])))
+        lane = jax.tree.map(lambda a: a[k], out).trim()
+        assert eager.outcome == S(int(out.status[k])) and int(eager.count) == int(lane.count)
+        np.testing.assert_allclose(lane.forces, eager.forces, rtol=0, atol=1e-10 * np.abs(eager.forces).max())
+    assert int(out.stats.contacts[2]) > 4 and float(out.final_depth[2]) < 0.005
 
 
 def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monkeypatch):
