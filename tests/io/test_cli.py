@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import warnings
@@ -115,6 +116,25 @@ def test_run_matches_python(run_dir):
         assert s["contact_regions"][f"finger{f}"]["n_stick"] == sum(r["n_stick"] for r in reg)
 
 
+def test_a_float32_scene_file_runs_in_float32_from_the_command_line(run_dir, tmp_path):
+    """README: ``precision = "float32"`` in [accuracy], and the CLI sets JAX's precision from it
+    (a fresh process, as a user runs it): the float64 run's squeeze to float32's accuracy,
+    with the same events, and not the float64 numbers to the last digits."""
+    path = tmp_path / "scene32.toml"
+    path.write_text(SCENE.replace('precision = "float64"', 'precision = "float32"'))
+    out = tmp_path / "out32"
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    r = subprocess.run([sys.executable, "-m", "jaxsqueeze", "run", str(path), "--out", str(out), "--no-plots", "-q"],
+                       capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    s32, s64 = (json.loads((o / "summary.json").read_text()) for o in (out, run_dir[1]))
+    assert (s32["precision"], s64["precision"]) == ("float32", "float64")
+    assert s32["status"] == s64["status"] == "SUCCESS" and s32["event_sequence"] == s64["event_sequence"]
+    F32, F64 = (np.array([s["total_force"][f"finger{f}"] for f in (0, 1)]) for s in (s32, s64))
+    scale = np.abs(F64).max()
+    assert 1e-12 * scale < np.abs(F32 - F64).max() < 1e-4 * scale
+
+
 def test_xdmf_reads_back(run_dir):
     path, out = run_dir
     spec = scenefile.load(path)
@@ -185,6 +205,35 @@ def test_scene_file_capacities_reach_the_settings():
     s = scenefile.load_text(base.replace("capacity = 64\n", "")).scene.settings
     assert (s.capacity, s.sliding_capacity, s.fused) == (None, None, False)
     assert scenefile.load_text(base.replace("capacity = 64", "capacity = 64\nfused = true")).scene.settings.fused
+
+
+def test_scene_file_keys_reach_the_scene():
+    """Each optional key of the schema (io/scenefile.py, README "Scene files") lands in the Scene
+    it describes: fingertip rotation, friction model, contact model, compliance build, the disk
+    and polygon-with-holes shapes, and a relative depth (ρ x the initial grip distance)."""
+    base = SCENE.replace("refine_edge = 0.003\nrefine_radius = 0.012\n", "")
+    sc = scenefile.load_text(base.replace("radius = 0.01", "radius = 0.01\nrotation = [[0.0, 0.0], [40.0, 0.0]]")
+                             .replace("friction = 0.3", 'friction = 0.3\nfriction_model = "stick"\ncontact = "point"\n'
+                                                        'method = "dense"')).scene
+    assert [list(map(float, r)) for r in sc.fingers.rotation] == [[0.0, 0.0], [40.0, 0.0]]
+    assert (sc.friction_model, sc.contact, sc.method) == ("stick", "point", "dense")
+    opposite = base.replace("points = [[-0.005, -0.05], [0.005, 0.05]]", "points = [[-0.01, -0.05], [-0.01, 0.05]]")
+    assert scenefile.load_text(opposite.replace("friction = 0.3", 'friction = 0.3\nfriction_model = "frictionless"')
+                               ).scene.friction_model == "frictionless"
+    disk = scenefile.load_text(base.replace('shape = "rectangle"\nwidth = 0.1\nheight = 0.1', 'shape = "disk"\nradius = 0.05')
+                               ).scene.mesh
+    r = np.linalg.norm(disk.points[disk.boundary] + disk.offset, axis=1)
+    np.testing.assert_allclose(r, 0.05, rtol=1e-9)
+    holed = base.replace('shape = "rectangle"\nwidth = 0.1\nheight = 0.1',
+                         'shape = "polygon"\nvertices = [[-0.05, -0.05], [0.05, -0.05], [0.05, 0.05], [-0.05, 0.05]]\n'
+                         'holes = [[[-0.01, -0.01], [0.01, -0.01], [0.01, 0.01], [-0.01, 0.01]]]')
+    mesh = scenefile.load_text(holed).scene.mesh
+    assert len(mesh.loops) == 2 and mesh.loops[1] > 0
+    inner = mesh.points[mesh.boundary[mesh.loops[0]:]] + mesh.offset
+    np.testing.assert_allclose(np.abs(inner).max(axis=1), 0.01, atol=1e-12)
+    rel = scenefile.load_text(base.replace("depth = 0.01", "relative_depth = 0.1")).scene
+    p = rel.mesh.points[list(rel.grip)]
+    assert float(rel.depth) == pytest.approx(0.1 * np.linalg.norm(p[0] - p[1]), rel=1e-12)
 
 
 def test_example_scene_reads_mesh_file():
@@ -370,6 +419,21 @@ def test_bad_scene_file(case, tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("argv, said", [(["run", "scene.toml", "--out", "OUT", "--bogus"], "unrecognized arguments: --bogus"),
+                                        (["run", "scene.toml"], "required: --out"),
+                                        (["runn"], "invalid choice: 'runn'"), ([], "required: COMMAND")])
+def test_a_bad_command_line_exits_2_with_usage_and_writes_nothing(argv, said, tmp_path, capsys):
+    """docs/errors.md: a bad command line exits 2 with argparse's usage line and one error line;
+    nothing is run or written."""
+    argv = [str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(argv)
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2
+    assert err.startswith("usage: jaxsqueeze") and re.search(r"^jaxsqueeze( run)?: error: .*" + re.escape(said), err, re.M), err
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("center, said", [("0.0", "got 0.0"), ("[[0.0, 0.0]]", "got an array of 1 (nested)"),
                                           ("[0.0, 0.0, 0.0]", "got an array of 3")])
 def test_a_centre_that_is_not_one_point_says_the_form_it_needs(center, said, tmp_path, capsys):
@@ -398,7 +462,7 @@ def test_post_consumers_honour_count_of_a_jit_result(tmp_path):
 
     spec = scenefile.load_text(SCENE.replace("refine_edge = 0.003\nrefine_radius = 0.012\n", "")
                                .replace("points = [[-0.005, -0.05], [0.005, 0.05]]",
-                                        "points = [[0.0, -0.05], [0.0, 0.05]]"))
+                                        "points = [[-0.01, -0.05], [-0.01, 0.05]]"))
     scene = spec.scene.replace(depth=0.004)        # (the summary refuses a scene of another depth)
     eager = jsq.squeeze(scene)
     k, e = int(eager.count), int(eager.n_events)
