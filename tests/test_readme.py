@@ -25,3 +25,22 @@ def test_readme_examples_run(tmp_path, monkeypatch):
     assert np.all(np.isfinite(np.asarray(ns["dwork"])))
     assert ns["best"].quality > 0 and ns["gmap"].feasible().any()
     assert float(jsq.quality.adversary_work(ns["pushed"])) > 0
+
+
+def test_the_flat_module_names_of_version_0_1_import_as_aliases():
+    """README: ``jaxsqueeze.fem``, ``jaxsqueeze.scene``, ``jaxsqueeze.views``, … still import
+    (``import``, ``from … import``, attribute access), each as the very module of its new home."""
+    import importlib
+
+    import jaxsqueeze as jsq
+    for old, home in jsq.MODULES.items():
+        new = importlib.import_module(f"jaxsqueeze.{home}")
+        assert importlib.import_module(f"jaxsqueeze.{old}") is new, old
+        assert getattr(jsq, old) is new
+    import jaxsqueeze.fem
+    from jaxsqueeze.views import summary
+    assert jaxsqueeze.fem.stiffness is jsq.mechanics.fem.stiffness and summary is jsq.post.views.summary
+    # a name that never existed is still an ImportError
+    import pytest
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("jaxsqueeze.nosuchmodule")

@@ -207,6 +207,36 @@ def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
     assert "placement" not in views.summary(a, square)["scene"]
 
 
+def test_frictionless_fingertips_are_reseated_on_the_line_of_their_contacts(square):
+    """docs/planning.md: placed frictionless fingertips are re-seated on the line through the
+    two nodes they touch (forces along it), and their cone test takes the node normals with
+    laws.FRICTIONLESS_TILT. Placed 20 mm along the edge from the mid-edge nodes and squeezed
+    along a line tilted by 0.2 rad, both touch nodes at x = 20 mm: the squeeze is the integer
+    grip of those nodes. Placed with only finger 0 moved, the nodes' segment leans 11.3° and
+    the margin is FRICTIONLESS_TILT (+ the round-off slack) − atan(0.2) < 0: INFEASIBLE_GRIP."""
+    from jaxsqueeze.simulation.laws import CONE_SLACK, FRICTIONLESS_TILT
+    sc = square.replace(friction_model="frictionless")
+    s = np.asarray(square.arc_length(square.grip))
+    P = np.asarray(square.mesh.points)
+    r = float(square.fingers.radius)
+    for ds, ok in ((np.array([0.02, -0.02]), True), (np.array([0.02, 0.0]), False)):
+        res = jsq.squeeze(sc.replace(grip=None, placement=plan.Placement(s=s + ds, angle=0.2)))
+        g = [int(v) for v in res.grip]
+        np.testing.assert_allclose(P[g[0]][0], 0.02, atol=1e-12)
+        e = (P[g[0]] - P[g[1]]) / np.linalg.norm(P[g[0]] - P[g[1]])
+        C = np.asarray(res.centres[0])                   # fingertip centres before the squeeze
+        np.testing.assert_allclose(C, P[g] + r * np.stack([e, -e]), atol=1e-12)
+        lean = np.arctan2(abs(e[0]), abs(e[1]))
+        assert float(res.margin) == pytest.approx(FRICTIONLESS_TILT + CONE_SLACK - lean, abs=1e-12)
+        if ok:
+            assert res.outcome == jsq.Status.SUCCESS
+            same = jsq.squeeze(sc.replace(grip=tuple(g)))
+            assert int(same.count) == int(res.count)
+            np.testing.assert_allclose(res.forces, same.forces, rtol=0, atol=1e-12 * np.abs(same.forces).max())
+        else:
+            assert res.outcome == jsq.Status.INFEASIBLE_GRIP and float(res.margin) < 0
+
+
 def _pushed(ellipse, x):
     """The ellipse placed at x = (s_0, s_1, angle, s_push) and pushed 2 mm by an adversary at
     arc length s_push after its squeeze: one signature, so that the derivative tests share
@@ -762,6 +792,14 @@ def test_a_search_history_records_undone_steps_once(ellipse):
     assert all(h.status == jsq.Status.SUCCESS for h in path)
     assert all(np.any(a.x != b.x) for a, b in zip(path, path[1:]))       # it moved at every accepted step
     assert found.quality == max(h.quality for h in path)
+    # docs/planning.md: the compiled gradient is shared by every search on scenes of the same
+    # shapes (other numbers, another start and optimizer: nothing compiles)
+    from jaxsqueeze.plan import search
+    compiled = search._value_and_grad._cache_size()
+    other = jsq.optimize_placement(ellipse.replace(friction=0.6, depth=0.005, fingers=jsq.Fingers(radius=0.012)),
+                                   "grip_force", init=[[0.01, P / 2]], optimizer=optax.adam(0.05), steps=2,
+                                   progress=False)
+    assert other.squeezes == 3 and search._value_and_grad._cache_size() == compiled
     from jaxsqueeze.plan.search import GraspMap
     grid = np.linspace(0.0, P, 4)[:3]
     status = np.where(np.eye(3, dtype=bool), jsq.Status.INFEASIBLE_GRIP, jsq.Status.SUCCESS)

@@ -638,6 +638,29 @@ def test_one_object_squeezed_in_both_precisions_gets_an_operator_of_each():
     assert again.G.dtype == np.float64 and again.G is op64.G
 
 
+def test_the_operator_cache_is_weak_and_bounded():
+    """README: ``scene.operator()`` caches per object, ν and method in a weak, bounded cache:
+    at most CACHE_PER_OBJECT operators per object (the oldest goes first), an equal rebuilt
+    mesh finds them, and dropping the object frees them (no operator holds its object)."""
+    import gc
+    import weakref
+
+    from jaxsqueeze.simulation import scene as scene_mod
+    mesh = jsq.shapes.rectangle(0.05, 0.03, max_edge=0.01)
+    held = len(scene_mod._operators)
+    nus = (0.1, 0.2, 0.3, 0.4, 0.45)
+    ops = [scene_mod.compliance_of(mesh, jsq.Material(1e5, nu, 0.01)) for nu in nus]
+    assert [key[0] for key in scene_mod._operators[mesh]] == list(nus[-scene_mod.CACHE_PER_OBJECT:])
+    twin = jsq.Mesh.from_arrays(np.asarray(mesh.points) + mesh.offset, mesh.triangles)   # rebuilt from the same data
+    assert twin == mesh and twin is not mesh
+    assert scene_mod.compliance_of(twin, jsq.Material(2e5, 0.45, 0.02)).G is ops[-1].G
+    assert scene_mod.compliance_of(mesh, jsq.Material(1e5, 0.1, 0.01)).G is not ops[0].G   # evicted: rebuilt
+    gone = weakref.ref(mesh)
+    del mesh, twin, ops
+    gc.collect()
+    assert gone() is None and len(scene_mod._operators) == held
+
+
 # ============================================================================ bad input: API
 def _no_trace(fn, match):
     """``fn`` raises ValueError matching ``match`` without compiling a squeeze."""

@@ -315,6 +315,40 @@ def test_fingertip_overlapping_a_reentrant_vertex_is_refused():
     V.check_scene(_scene(mesh, grip=(near(star[0]), near(star[4])), depth=0.005))
 
 
+ENV_GUARDS = r"""
+import numpy as np, pytest
+import jaxsqueeze as jsq
+from jaxsqueeze.geometry import curves, shapes
+from jaxsqueeze.mechanics import band
+from jaxsqueeze.simulation import validate as V
+assert (shapes.MAX_ELEMENTS, band.MAX_NODES, V.MEMORY_LIMIT) == (500, 16, 1_000_000)
+with pytest.raises(ValueError, match=r"triangles.*JAXSQUEEZE_MAX_ELEMENTS"):
+    shapes.rectangle(0.1, 0.1, max_edge=0.004)
+with pytest.raises(ValueError, match=r"a band of 32 nodes .* limit of 16 nodes .*JAXSQUEEZE_MAX_BAND_NODES"):
+    band.Band.from_curve(curves.sample(curves.circle(0.04), 32))
+lines = V.check_costs(m=100, n=800, method="sparse", capacity=64, max_steps=400, max_events=256)
+assert lines and all("env JAXSQUEEZE_MEMORY_LIMIT" in line for line in lines), lines
+print("ok")
+"""
+
+
+def test_cost_guards_take_their_limits_from_the_environment():
+    """docs/errors.md: JAXSQUEEZE_MAX_ELEMENTS, JAXSQUEEZE_MAX_BAND_NODES and
+    JAXSQUEEZE_MEMORY_LIMIT set the cost guards of a new process (read at import), and a request
+    beyond them is refused naming the variable; the defaults here accept the same requests."""
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, JAXSQUEEZE_MAX_ELEMENTS="500", JAXSQUEEZE_MAX_BAND_NODES="16", JAXSQUEEZE_MEMORY_LIMIT="1e6")
+    r = subprocess.run([sys.executable, "-c", ENV_GUARDS], capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-3000:]
+    from jaxsqueeze.geometry import curves, shapes
+    from jaxsqueeze.mechanics import band
+    assert shapes.rectangle(0.1, 0.1, max_edge=0.004).triangles.shape[0] > 500
+    assert band.Band.from_curve(curves.sample(curves.circle(0.04), 32)).m == 32
+    assert V.check_costs(m=100, n=800, method="sparse", capacity=64, max_steps=400, max_events=256) == []
+
+
 def test_cost_guards():
     lim = V.MEMORY_LIMIT
     assert V.history_bytes(100, 64, 400, 256) < 50e6            # the defaults are cheap
