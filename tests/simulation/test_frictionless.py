@@ -1,8 +1,9 @@
 """Frictionless squeezes that are well posed reach 15 % depth (issue 9; docs/numerics.md §5.1).
 
-Four objects gripped on a symmetry line of the shape: the 0.1 m square and a disk and an
+Five objects gripped on a symmetry line of the shape: the 0.1 m square and a disk and an
 ellipse with exactly mirror-symmetric meshes, and the foam square of the built-in scene
-(``shapes.rectangle`` with its refinement, a mesh without mirror symmetry) with a centred grip.
+(``shapes.rectangle`` with its refinement) and ``shapes.rectangle(0.1, 0.1, 0.005)`` (the
+README's example), meshes without mirror symmetry, with a centred grip.
 Every one ends with SUCCESS at 15 % of its height; its forces push and lie on the fingertip
 radius, exactly on the mirror-symmetric meshes and within the documented share of the drift
 rule's restraint on the foam square; and the grip force is the μ → 0 limit of the Coulomb
@@ -24,7 +25,9 @@ CASES = {   # mesh, half-height [m]
     "disk": (symmetric_ellipse(0.05, 0.05, 0.01), 0.05),
     "ellipse": (symmetric_ellipse(0.03, 0.02, 0.004), 0.02),
     "foam square": (FOAM, 0.05),
+    "rectangle 5 mm": (jsq.shapes.rectangle(0.1, 0.1, max_edge=0.005), 0.05),     # README's example
 }
+SYMMETRIC = ("square", "disk", "ellipse")
 
 
 def scene(name, friction_model="frictionless", mu=0.0):
@@ -56,7 +59,7 @@ def test_frictionless_squeeze_reaches_15_percent(runs, name):
     assert np.all(np.asarray(res.modes)[np.asarray(res.modes) > 0] >= 2)        # every contact slides
     fn, ft, on = radial_split(res)
     scale = np.abs(np.asarray(res.forces)).max()
-    symmetric = name != "foam square"
+    symmetric = name in SYMMETRIC
     # on the mirror-symmetric meshes the drift rule exerts nothing; on the foam square its
     # restraint is the measured 0.09 % (bound 0.3 %) of the largest force, and a contact that
     # joins may carry a transient pull of 4e-4 (bound 1e-3) that the next row removes
