@@ -600,6 +600,10 @@ def squeeze_oracle(points, triangles, boundary, E, nu, thickness, radius, grip, 
 
 #: a contact pulling by more than this share of the largest force right after an event pass lets go there
 PULL = 1e-8
+#: a free node inside a fingertip by more than this many gap_tol right after an event pass joins there
+SUNK = 10
+#: event passes at one depth after which a set that still changes is no consistent set: STALLED
+SETTLE = 16
 
 
 def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, max_events):
@@ -617,8 +621,10 @@ def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, ma
         rows.append(dict(d=d, tot=tot, C=st["C"].copy()))
 
     guard = 0
-    pulled = []     # contacts that pull in the set an event pass left: they let go at that depth
+    pulled = []     # contacts that pull, and free nodes sunk into a tip, in the set an event pass left
+    passes = 0      # event passes at the current depth
     while status == "SUCCESS" and d < D * (1 - 1e-14):
+        passes = passes + 1 if pulled else 1
         if pulled:
             trig, st_hi, hi = pulled, st, d
         else:
@@ -695,11 +701,19 @@ def _run(sq, cfg, st, status, d, D, h, depth_tol, gap_tol, probe, ftol, rtol, ma
                 st = sq.solve(cfg, d)
                 status = _failure(sq, cfg)
         # a contact that pulls in the new set by more than round-off (a release that loaded it
-        # into tension) lets go here, with the nodes that sink meanwhile, at this depth, not at
-        # the next step's end, where its force may have recovered
+        # into tension) lets go here, and a free node that a release left inside a tip (full
+        # stick: a dropped shear force) joins here, each with the other contacts that pull or
+        # nodes that sink meanwhile, at this depth, not at the next step's end, where the force
+        # may have recovered or the node come out again; a set that still changes after SETTLE
+        # passes at one depth (it pulls in contact and sinks when free) is no consistent set
         now = sq.triggers(cfg, st, gap_tol, ftol * _fscale(st), rtol) if status == "SUCCESS" else []
-        pulled = [t for t in now if t[0] in "AB"] if any(t[0] == "B" and t[3] < -PULL * _fscale(st) for t in now) else []
+        settle = any((t[0] == "B" and t[3] < -PULL * _fscale(st)) or (t[0] == "A" and t[3] < -SUNK * gap_tol)
+                     for t in now)
+        pulled = [t for t in now if t[0] in "AB"] if settle else []
         record(d, st)
+        if pulled and passes >= SETTLE:
+            status = "STALLED"
+            break
         guard += 1
         if guard > max_events:
             status = "EVENT_OVERFLOW"

@@ -544,7 +544,7 @@ def _reversed(model: Model, st: State, sol: Solution, mode):
 
 def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     """The contact set just past d*, judged from the solve at d* and its rate (the probe
-    d* + η to first order). Returns (mode, finger, theta, changed, unsettled, logged, kinds):
+    d* + η to first order; a new contact's pull at d* + min(event_tol, η)). Returns (mode, finger, theta, changed, unsettled, logged, kinds):
     ``logged`` (m,) the nodes whose change is an event of the log, of kinds ``kinds`` (m,).
 
     Coulomb and full stick: on the first pass a new contact that would pull at the probe (in
@@ -587,8 +587,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     test = st.added == st.checks                          # joined on the last pass (or by the event)
     # at d* a contact just made carries almost no force. In float32 that value is round-off
     # (the foam square's node 89 chattered in and out at 12.0 mm until STALLED), so the sign
-    # of the force's rate decides; in float64 the value at the probe d* + η does
-    pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32 else (fn <= 0))
+    # of the force's rate decides; in float64 its value just past d*, at the event location's
+    # error event_tol (at most η): a node that joined where a release sank it pushes at d*
+    # and may pull again a little deeper, a cycle that shrinks as it repeats; judged at d* + η
+    # it pulled at once, and the cycle stalled at one depth (docs/numerics.md §2, 21)
+    pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32
+                   else (sol.fn + jnp.minimum(model.ev_tol, eta) * dsol.fn <= 0))
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test
     theta, stuck, out, flip = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on), jnp.zeros_like(on)

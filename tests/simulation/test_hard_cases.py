@@ -385,37 +385,39 @@ def test_a_finger_peeling_off_releases_its_contacts_at_one_depth():
     assert res.depth[-2] < res.final_depth and np.all(np.isfinite(res.forces))     # one row for both releases
 
 
-def test_a_release_that_lands_a_node_inside_a_fingertip_rejoins_and_stalls_when_it_repeats():
+def test_a_release_that_lands_a_node_inside_a_fingertip_rejoins_until_it_comes_free():
     """Full stick with turning tips (found by the rotating oracle): tip 1 drags its grip node 134
     sideways until its normal force reaches zero while it still carries 1.1 N of shear. Event B
     drops that shear and the node lands 4.8e-4 L inside the tip: it joins again where it is (A
     at the same depth, as the next step's event location would find it; it went on with the
-    node inside the tip, SUCCESS, and later stopped there, STALLED). At 12.16 mm it lets go
-    again, lands inside, joins and pulls at once: sticking needs a pull, release a
-    penetration, so no contact set is consistent there, and after SETTLE_ITERS passes of B/A
-    at one depth the squeeze stops with STALLED at that row. Every row before it holds."""
-    import dataclasses
-    from jaxsqueeze.simulation.engine import SETTLE_ITERS, SUNK_TOLS
+    node inside the tip, SUCCESS, and later stopped there, STALLED). At 12.164 mm it lets go
+    again, lands inside and joins, and pulls again 2.7 µm and then 30 nm deeper: cycles that
+    shrink until, released at 12.167192 mm, it no longer sinks. The engine judged a contact made
+    at the event depth by its force 3 µm (step / 100) beyond it, past the next cycle's end: it
+    pulled at once, and after SETTLE_ITERS passes of B/A at one depth the squeeze stopped with
+    STALLED at 12.1645 mm. Judged at event_tol beyond it (3 nm), the squeeze follows the cycles
+    to 15 mm, event for event with the oracle at any of its steps (docs/numerics.md §2, 21),
+    and every row holds the invariants."""
+    from jaxsqueeze.simulation.engine import SUNK_TOLS
     mesh = symmetric_square(0.1, 0.01)
     sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
                    fingers=jsq.Fingers(radius=0.03, rotation=[[-27.5, 0.0], [33.5, 0.0]]),
                    grip=(6, 134), friction=0.5, depth=0.015, friction_model="stick")
     res = jsq.squeeze(sc)
-    assert res.status == jsq.Status.STALLED and res.final_depth == pytest.approx(0.0121645, abs=1e-6)
+    assert res.outcome == jsq.Status.SUCCESS and res.final_depth == pytest.approx(0.015, rel=1e-12)
     rows = res.events.rows()
-    first = [i for i, r in enumerate(rows) if r[1:] == (134, "B", 1)][0]
-    assert rows[first][0] == pytest.approx(0.0119328, abs=1e-6) and rows[first + 1][1:] == (134, "A", 1)
-    assert rows[first + 1][0] == rows[first][0]
-    repeat = rows[first + 2:]
-    assert [r[1:] for r in repeat] == [(134, "B" if i % 2 == 0 else "A", 1) for i in range(SETTLE_ITERS + 1)]
-    assert all(r[0] == res.final_depth for r in repeat)
-    check_states(dataclasses.replace(res, count=res.count - 1), mesh, 0.5, "stick")
+    cycles = [(round(d * 1e3, 6), k) for d, n, k, f in rows if (n, f) == (134, 1)]
+    assert cycles == [(11.932844, "B"), (11.932844, "A"), (12.164466, "B"), (12.164466, "A"),
+                      (12.167162, "B"), (12.167162, "A"), (12.167192, "B")]
+    check_states(res, mesh, 0.5, "stick")
     k = list(np.asarray(res.nodes)).index(134)
     gap = lambda r: np.linalg.norm(mesh.points[mesh.boundary][k] + np.asarray(res.boundary_displacement[r][k])  # noqa: E731
                                    - np.asarray(res.centres[r][1])) - 0.03
-    at = int(np.flatnonzero(np.asarray(res.depth) == rows[first][0])[-1])
-    assert res.modes[at][k] == 1 and abs(gap(at)) <= 1e-12          # rejoined on the tip's surface
-    assert res.modes[-1][k] == 0 and gap(-1) < -SUNK_TOLS * 1e-9 * 0.1   # the last row: inside (gap_tol 1e-9 L)
+    for d, kind in cycles:                  # rejoined on the tip's surface; free at last, outside it
+        at = int(np.flatnonzero(np.abs(np.asarray(res.depth) - d * 1e-3) <= 1e-9)[-1])
+        if kind == "A":
+            assert res.modes[at][k] == 1 and abs(gap(at)) <= 1e-12
+    assert res.modes[at][k] == 0 and gap(at) > -SUNK_TOLS * 1e-9 * 0.1
 
 
 def test_step_bound_returns_max_steps():
@@ -647,6 +649,7 @@ def test_the_operator_cache_is_weak_and_bounded():
 
     from jaxsqueeze.simulation import scene as scene_mod
     mesh = jsq.shapes.rectangle(0.05, 0.03, max_edge=0.01)
+    gc.collect()                          # objects of earlier tests that are garbage already go now
     held = len(scene_mod._operators)
     nus = (0.1, 0.2, 0.3, 0.4, 0.45)
     ops = [scene_mod.compliance_of(mesh, jsq.Material(1e5, nu, 0.01)) for nu in nus]
@@ -839,16 +842,18 @@ def test_asymmetric_frictionless_grip_stops_with_stalled():
     assert np.any(ft[-1][on[-1]] > DRIFT_SHARE * row_max[-1])       # the row that stopped it
 
 
-def test_a_contact_that_undoes_itself_stalls_at_its_first_repeat_wherever_the_band_starts():
-    """A segment-contact circle band under a wide fingertip: at one depth a new contact on each
-    tip (A) would pull if it stuck. Under full stick it is released again (B), the set returns
-    to where it was and the squeeze stops with STALLED at the first repeat (two rounds). The
-    stall test compared the depth of the repeat with the last row's exactly, and each repeat
-    landed 1e-16 to 3e-12 m past it, so how many A/B rounds ran before STALLED (2 to 7)
-    depended on which point the band's list started at. Under Coulomb (mu = 0.26) the pulling
-    contacts slide instead (C at the depth they joined; Section IV-B.1), pushing from there on
-    with their forces on the cone edge, and the band reaches its depth: it once stalled as
-    under full stick."""
+def test_a_contact_that_joins_pulling_soon_goes_the_same_way_wherever_the_band_starts():
+    """A segment-contact circle band under a wide fingertip: at 21.7775 mm a new contact on each
+    tip (A) pushes, and would pull 0.38 µm deeper if it stuck. Under full stick it lets go there
+    (B), lands inside its tip and joins again (A), and once more 37 µm deeper; then it holds to
+    the target depth. (Judged by its force a step / 100 = 4.8 µm beyond the event, the contact
+    pulled at once and was released at its own depth, again and again: STALLED at the first
+    repeat, docs/numerics.md §2, 21. Before that, the stall test compared the depth of the
+    repeat with the last row's exactly, and each repeat landed 1e-16 to 3e-12 m past it, so
+    how many A/B rounds ran before STALLED, 2 to 7, depended on which point the band's list
+    started at.) Under Coulomb (mu = 0.26) the pulling contacts slide instead (C at the depth
+    they joined; Section IV-B.1), pushing from there on with their forces on the cone edge.
+    Both reach the depth the same way from either start of the band's list."""
     from jaxsqueeze.geometry import curves
     from jaxsqueeze.mechanics.band import Band
     m, h = 64, 5e-3
@@ -866,8 +871,11 @@ def test_a_contact_that_undoes_itself_stalls_at_its_first_repeat_wherever_the_ba
             nodes = sorted((int(n) + k) % m for _, n, _, _ in res.events.rows())
             seen[model].append((int(res.count), kinds, nodes, float(res.final_depth), np.asarray(res.total_force[-1])))
             if model == "stick":
-                # one node on each fingertip joins and lets go, then again: STALLED (it was up to 7 rounds)
-                assert res.outcome == jsq.Status.STALLED and kinds == ["A", "A", "B", "B"] * 2, kinds
+                # one node on each fingertip joins, lets go and joins again, twice, and holds
+                assert res.outcome == jsq.Status.SUCCESS and kinds == ["A", "A"] + ["B", "B", "A", "A"] * 2, kinds
+                # with two adjacent contacts per tip on this stiff thin wall the solve puts them
+                # 1e-10 to 3.7e-10 L off their circles, under Coulomb as well: its conditioning
+                check_states(res, band, 0.26, "stick", physics.FLOAT64._replace(circle=1e-9))
                 continue
             assert res.outcome == jsq.Status.SUCCESS and kinds == ["A", "A", "C", "C"], kinds
             assert len({d for d, *_ in res.events.rows()}) == 1              # slides from the depth it joined

@@ -446,6 +446,27 @@ def test_a_contact_a_cascade_leaves_pulling_lets_go_at_its_depth():
     check_states(res, mesh, 0.5, "stick")
 
 
+def test_a_grip_node_that_peels_off_in_shrinking_cycles_is_followed_to_its_end():
+    """Full stick on the rectangle 80 x 50 mm (5 mm edges), nu = -0.9, r = 240 mm, grip nodes 27
+    and 51, tips not turning. Grip node 27 pulls at 1.2536 mm and lets go (B); released, it lies
+    inside its tip (the release dropped its shear) and joins again where it is (A), pushing,
+    until it pulls again: at 1.2836, 1.0 µm deeper, 34 nm deeper, and at 1.284678 mm released
+    it no longer sinks and the tips go on to 3.2 mm. The engine judged a contact made at the
+    event depth d* by its force at d* + η (η = step / 100 = 0.64 µm here), beyond the 34 nm
+    cycle's end: it pulled at once, let go, sank and joined again at one depth, STALLED at
+    1.2846 mm. It now judges it at d* + event_tol (the event location's error, 6.4 nm), where
+    this contact pushes. The oracle joined a sunk node only at its next step's end, where node 27
+    was out again; it now joins one sunk by more than 10 gap_tol at the event depth, as the
+    engine does, and both follow the cycles event for event (random full-stick scene, 2026-12-05)."""
+    mesh = jsq.shapes.rectangle(0.08, 0.05, max_edge=0.005)
+    _, res, o, L = _turning(mesh, -0.9, 0.24, (27, 51), None, 0.0032, None, model="stick")
+    assert res.outcome.name == o.status == "SUCCESS"
+    _agree(res, o, L, "AAABBAABABBA")     # one depth's events sorted by kind
+    cycles = [round(d * 1e3, 6) for d, n, k, f in res.events.rows() if (n, k) == (27, "B")]
+    assert cycles == [1.253009, 1.283629, 1.284644, 1.284678]
+    check_states(res, mesh, 0.5, "stick")
+
+
 def test_a_rejected_contact_set_arms_no_sliding_node(pulling_meshes):
     """Node 28 slides with an inconsistent rate (a jam, unarmed) when node 3 joins at 2.029 mm
     and slides (A, C). The engine's first pass solves the set with node 3 sticking, where 28's
