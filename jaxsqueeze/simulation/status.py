@@ -46,7 +46,8 @@ _ADVICE = {
     Status.EVENT_OVERFLOW: "The event log is full. Raise Settings.max_events.",
     Status.STALLED: ("No consistent contact set exists at this depth: a node touched a fingertip but as a contact "
                      "it would pull, or a released contact would land inside its fingertip (full stick with "
-                     "turning fingertips: use Coulomb friction), or (frictionless) holding the object in place "
+                     "turning fingertips: use Coulomb friction, or a finer Settings(event_tol) where a node "
+                     "peels off in ever shorter cycles), or (frictionless) holding the object in place "
                      "would take more than 1 % tangential force, i.e. the object would slide out sideways (an "
                      "asymmetric frictionless grip). Grip nearer a symmetry line, refine the mesh near the "
                      "contact, or use Coulomb friction."),

@@ -467,6 +467,23 @@ def test_a_grip_node_that_peels_off_in_shrinking_cycles_is_followed_to_its_end()
     check_states(res, mesh, 0.5, "stick")
 
 
+def test_cycles_shorter_than_event_tol_stall_and_a_finer_event_tol_follows_them():
+    """docs/errors.md, STALLED: the same rectangle, nu = -0.9, r = 80 mm, grip nodes 14 and 21.
+    Grip node 21 peels off in cycles (1.048 to 1.118 mm), and again from 2.75 mm with nodes 21
+    and 22 in turn, where the cycles come closer than the default event_tol (step / 10,000,
+    12.8 nm): the engine cannot tell them apart at one depth and stops STALLED at 2.75 mm. With
+    event_tol = 1e-10 m it follows them, 88 events, event for event with the oracle (located to
+    1e-12 L), to 6.4 mm."""
+    mesh = jsq.shapes.rectangle(0.08, 0.05, max_edge=0.005)
+    scene, res, o, L = _turning(mesh, -0.9, 0.08, (14, 21), None, 0.0064, None, model="stick")
+    assert res.outcome == jsq.Status.STALLED and 2.7e-3 < float(res.final_depth) < 2.8e-3
+    assert "event_tol" in res.outcome.advice
+    fine = jsq.squeeze(scene.replace(settings=jsq.Settings(event_tol=1e-10)))
+    assert fine.outcome.name == o.status == "SUCCESS" and len(o.events) == 88
+    _agree(fine, o, L, {"A", "B"})
+    check_states(fine, mesh, 0.5, "stick")
+
+
 def test_a_rejected_contact_set_arms_no_sliding_node(pulling_meshes):
     """Node 28 slides with an inconsistent rate (a jam, unarmed) when node 3 joins at 2.029 mm
     and slides (A, C). The engine's first pass solves the set with node 3 sticking, where 28's
