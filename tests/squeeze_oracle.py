@@ -41,12 +41,17 @@ bordered, operator or linalg modules); it only follows the library's documented 
   slider whose force still pulls and does not rise takes the other edge (no event). Events found in one bisection bracket are applied together (mirror-
   symmetric pairs share a depth); a contact that pulls lets go (B) and takes no C or D there,
   and a finger left without contacts ends the squeeze (LOST_CONTACT).
+* Settling at an event depth: right after the events of one depth, a contact that pulls by
+  more than PULL of the largest force lets go, and a free node inside a tip by more than SUNK
+  gap_tol joins (a release can drop a stuck contact's shear), at that depth, with the other
+  triggers there; a set still changing after SETTLE such passes -> "STALLED".
 * D at an event depth: after the events of one depth are applied (and the new contacts'
   hypotheses settled), armed sliding nodes whose rate is negative stick there (D events at
   that depth), one at a time, the most negative rate first, re-solving after each, until no
   armed rate is negative or the squeeze fails.
 * Failure: every contact on one finger sliding (Coulomb only) -> "SLIP_FAILURE"; a finger
-  without contacts -> "LOST_CONTACT"; else "SUCCESS" at the target depth.
+  without contacts -> "LOST_CONTACT"; no consistent set at one depth -> "STALLED"; else
+  "SUCCESS" at the target depth.
 
 Units: everything is computed in scaled units (lengths / L, forces / (E h L), L the largest
 extent of the object) and returned in SI.

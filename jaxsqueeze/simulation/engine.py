@@ -544,8 +544,9 @@ def _reversed(model: Model, st: State, sol: Solution, mode):
 
 def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     """The contact set just past d*, judged from the solve at d* and its rate (the probe
-    d* + η to first order; a new contact's pull at d* + min(event_tol, η)). Returns (mode, finger, theta, changed, unsettled, logged, kinds):
-    ``logged`` (m,) the nodes whose change is an event of the log, of kinds ``kinds`` (m,).
+    d* + η to first order; a new contact's pull at d* + min(event_tol, η)). Returns (mode,
+    finger, theta, changed, unsettled, logged, kinds): ``logged`` (m,) the nodes whose change
+    is an event of the log, of kinds ``kinds`` (m,).
 
     Coulomb and full stick: on the first pass a new contact that would pull at the probe (in
     float32: whose force's rate is not positive, as its value is round-off) is dropped, a B
