@@ -69,6 +69,11 @@ DIP_TRIES = 4
 DRIFT_SHARE = 1e-2
 #: a free node this many gap tolerances inside a fingertip after an event joins there (event A)
 SUNK_TOLS = 10
+#: an event that undid itself within ``event_tol`` of the row it started from, or a contact set
+#: that did not settle at one depth (a node that peels off in cycles shorter than the
+#: tolerance), is resolved again with the tolerance divided by REFINE[0], at most REFINE[1]
+#: times in a squeeze (float64, friction), before the squeeze stops STALLED (:func:`check`)
+REFINE = (10.0, 6)
 
 
 # ----------------------------------------------------------------------------- loop state
@@ -85,6 +90,7 @@ class Stats(NamedTuple):
     refreshes: jax.Array       # recomputations of the kept bordered inverse (contacts.update)
     contacts: jax.Array        # most contact nodes at once, the set that overflowed its slots included
     sliding: jax.Array         # most sliding contact nodes at once (likewise)
+    refined: jax.Array         # times event_tol was divided by REFINE[0] to resolve an event (check)
 
 
 class Bracket(NamedTuple):
@@ -201,7 +207,7 @@ def init(model: Model) -> State:
         events=(z(E, dt), z(E, jnp.int32), z(E, jnp.int32), z(E, jnp.int32)),
         hist=(z(H, dt), z((H, m), jnp.int8), z((H, m), jnp.int8), z((H, m), dt), z((H, m, 2), dt),
               z((H, m, 2), dt), z((H, F, 2), dt), z((H, F), dt), z((H, 3), dt), z(H, dt)),
-        count=i32(0), stats=Stats(*(i32(0),) * 5, zero, *(i32(0),) * 4), squeeze_status=i32(RUNNING),
+        count=i32(0), stats=Stats(*(i32(0),) * 5, zero, *(i32(0),) * 5), squeeze_status=i32(RUNNING),
         squeeze_events=i32(0),
         margin=model.margin, grip=model.grip, invalid=model.invalid, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt),
         missed=jnp.array(0, jnp.int32), limit=jnp.array(jnp.inf, dt))
@@ -237,6 +243,7 @@ def ahead(model: Model, st: State):
 def step(model: Model, st: State) -> State:
     """One loop iteration: one solve at :func:`target`, then the phase's update, which may
     accept the solve as the next row."""
+    model = dataclasses.replace(model, ev_tol=model.ev_tol / jnp.asarray(REFINE[0], model.ev_tol.dtype) ** st.stats.refined)
     with jax.named_scope("target"):      # (the scopes name the parts in profiles: profile_row.py)
         d = target(model, st)
     with jax.named_scope("solve"):
@@ -561,9 +568,10 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     d* whose force is rising, by a pull its rate makes up within ``event_tol``, is joining (d*
     lies before its touch by up to ``event_tol``), not peeling. With segment contacts, a free
     node found inside a fingertip (a release that dropped a shear force) joins there, an A
-    event tested as a new contact on the next pass, for at most ``SETTLE_ITERS`` passes. A
-    node still inside, or a contact still peeling, after them is ``unsettled``: the check
-    stops the squeeze with STALLED. Under Coulomb, once the new contacts hold, the armed sliding
+    event tested as a new contact on the next pass (by its force at d*), for at most
+    ``SETTLE_ITERS`` passes (more after a refinement, :func:`check`). A node still inside, or
+    a contact still peeling, after them is ``unsettled``: the check resolves the set again
+    with a finer ``event_tol`` or stops the squeeze with STALLED. Under Coulomb, once the new contacts hold, the armed sliding
     contact whose slip rate is most reversed at d* sticks there, a D event
     (:func:`_reversed`), one per pass.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
@@ -589,11 +597,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # at d* a contact just made carries almost no force. In float32 that value is round-off
     # (the foam square's node 89 chattered in and out at 12.0 mm until STALLED), so the sign
     # of the force's rate decides; in float64 its value just past d*, at the event location's
-    # error event_tol (at most η): a node that joined where a release sank it pushes at d*
-    # and may pull again a little deeper, a cycle that shrinks as it repeats; judged at d* + η
-    # it pulled at once, and the cycle stalled at one depth (docs/numerics.md §2, 21)
-    pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32
-                   else (sol.fn + jnp.minimum(model.ev_tol, eta) * dsol.fn <= 0))
+    # error event_tol (at most η). A node that joined where a release sank it (a later pass)
+    # carries a force of its own at d*, and is judged there: it pushes at d* and may pull again
+    # a little deeper, a cycle that shrinks as it repeats; judged past d* it pulled at once,
+    # and the cycle stalled at one depth (docs/numerics.md §2, 21 and 22)
+    probe = jnp.where(st.added > 0, 0.0, jnp.minimum(model.ev_tol, eta))
+    pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32 else (sol.fn + probe * dsol.fn <= 0))
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test
     theta, stuck, out, flip = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on), jnp.zeros_like(on)
@@ -606,7 +615,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # contacts let the other nodes sink by design.)
     sunk = (ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol) & jnp.all(held > 0) \
         if model.cfg.contact == "segment" else jnp.zeros_like(on)
-    join = sunk & (st.checks < SETTLE_ITERS)
+    budget = SETTLE_ITERS * (1 + st.stats.refined)                # (check: passes again after a refinement)
+    join = sunk & (st.checks < budget)
     near, ang = _attach(model, model.op.points + sol.u, st.d_star)
     mode = jnp.where(join, STICK, mode)
     finger = jnp.where(join, near, ns.finger).astype(jnp.int32)
@@ -650,7 +660,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     joining = (st.added >= 0) & (dsol.fn > 0) & (sol.fn + model.ev_tol * dsol.fn >= 0)
     scale = jnp.maximum(largest(sol.F), st.bracket.fmax)
     peeling = on & ~joining & ~flip & (sol.fn < -share * scale) & jnp.all(held > 0)
-    peeled = peeling & (st.checks < SETTLE_ITERS)
+    peeled = peeling & (st.checks < budget)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled
     # after SETTLE_ITERS passes a node still inside a tip, or a contact still pulling, leaves
@@ -662,9 +672,12 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
 
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     """Phase CHECK: the new contact set solved at d*. Test it by hypothesis; if that changed
-    it, update the slots and solve again at d*; else accept the row (and stop with STALLED
-    when the event undid itself at the depth it started from, within event_tol: it would repeat
-    forever; a finger left without contacts ends it as LOST_CONTACT instead).
+    it, update the slots and solve again at d*; else accept the row. An event that undid itself
+    at the depth it started from, within event_tol, would repeat forever; so would a set that
+    does not settle (``unsettled``). Either is first resolved again with event_tol / REFINE[0]
+    (the row accepted and its event located anew, or the set checked again at d*), at most
+    REFINE[1] times in a squeeze, then stops the squeeze with STALLED (a finger left without
+    contacts ends it as LOST_CONTACT instead).
     Returns (state, accept)."""
     mode, finger, theta, changed, unsettled, logged, kinds = _hypothesis(model, st, sol, dsol)
     again = changed & ~unsettled & (st.fault == RUNNING)      # a faulted run stops at this row
@@ -678,10 +691,14 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
 
     # a finger left empty is no stall: the row is accepted and the squeeze ends, LOST_CONTACT
     held, _ = _per_finger(model, st.nodes.mode, st.nodes.finger)
-    stalled = (jnp.all(st.nodes.mode == st.before) & (d_star <= st.d + model.ev_tol) & jnp.all(held > 0)) \
-        | unsettled
-    fault = jnp.where(stalled & (st.fault == RUNNING), Status.STALLED, st.fault).astype(jnp.int32)
-    return lax.cond(again, retry, lambda: _with(st, fault=fault)), ~again
+    undone = jnp.all(st.nodes.mode == st.before) & (d_star <= st.d + model.ev_tol) & jnp.all(held > 0) & ~unsettled
+    refine = (undone | unsettled) & (st.stats.refined < REFINE[1]) & (st.fault == RUNNING) \
+        & (model.ev_tol >= REFINE[0] * 100 * jnp.finfo(d_star.dtype).eps) \
+        if d_star.dtype == jnp.float64 and model.cfg.friction_model != "frictionless" else False
+    fault = jnp.where((undone | unsettled) & ~refine & (st.fault == RUNNING), Status.STALLED, st.fault).astype(jnp.int32)
+    settle = unsettled & refine              # CHECK again at d*: the finer tolerance, SETTLE_ITERS more passes
+    done = lambda: _with(st, fault=fault, stats=st.stats._replace(refined=st.stats.refined + refine))  # noqa: E731
+    return lax.cond(again, retry, done), ~again & ~settle
 
 
 # ----------------------------------------------------------------------------- finish

@@ -108,7 +108,9 @@ class SqueezeResult:
     stats: :class:`~jaxsqueeze.simulation.engine.Stats` (steps, events, Newton and bracket
         iterations, largest Newton residual, solves, recomputations of the kept bordered
         inverse, and the most contact and sliding nodes at once: the smallest
-        ``Settings.capacity`` and ``sliding_capacity`` that run this squeeze without overflow).
+        ``Settings.capacity`` and ``sliding_capacity`` that run this squeeze without overflow;
+        ``refined``: times an event was resolved again with ``event_tol`` / 10, see
+        ``engine.REFINE``).
     invalid: () int, index into ``validate.FIELDS`` of the first invalid input, -1 if none.
     margin: () smooth feasibility margin of the grip [rad]: the friction angle minus the larger
         angle between the segment joining the first contacts and their inward normals; < 0

@@ -47,7 +47,8 @@ _ADVICE = {
     Status.STALLED: ("No consistent contact set exists at this depth: a node touched a fingertip but as a contact "
                      "it would pull, or a released contact would land inside its fingertip (full stick with "
                      "turning fingertips: use Coulomb friction, or a finer Settings(event_tol) where a node "
-                     "peels off in ever shorter cycles), or (frictionless) holding the object in place "
+                     "peels off in ever shorter cycles; the squeeze already retried with event_tol down to "
+                     "1e-6 of it, result.stats.refined), or (frictionless) holding the object in place "
                      "would take more than 1 % tangential force, i.e. the object would slide out sideways (an "
                      "asymmetric frictionless grip). Grip nearer a symmetry line, refine the mesh near the "
                      "contact, or use Coulomb friction."),

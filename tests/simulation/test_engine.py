@@ -379,10 +379,13 @@ def test_kept_inverse_stays_exact_over_many_contact_changes():
     np.testing.assert_allclose(np.asarray(checked.Minv), ref, rtol=0, atol=1e-9 * np.abs(ref).max())
 
 
-def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
+def test_check_refines_then_stops_with_stalled_when_an_event_undoes_itself(model, touched):
     """check: after an event at the depth the squeeze already stood at, a contact set that came
-    back to the modes from before the event would repeat forever: STALLED (a fault that finish
-    reports first), never a loop. The same pass with the depth moved on is accepted as a row."""
+    back to the modes from before the event would repeat forever. It is accepted as a row with
+    ``stats.refined`` raised (the loop divides event_tol by REFINE[0] per refinement, and the
+    next step locates the event anew), at most REFINE[1] times; then STALLED (a fault that
+    finish reports first), never a loop. The same pass with the depth moved on is accepted as a
+    row, no refinement."""
     st = _step(model, touched)                                        # a row at d = h, phase ADVANCE
     sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
                                               (s.d,), (jnp.ones_like(s.d),)))(model, st)
@@ -390,11 +393,38 @@ def test_check_stops_with_stalled_when_an_event_undoes_itself(model, touched):
                                  added=jnp.full_like(st.added, -1), checks=jnp.asarray(0, jnp.int32))
     chk = jax.jit(engine.check)
     out, accept = chk(model, undone, sol, dsol, st.d)
-    assert bool(accept) and int(out.fault) == Status.STALLED
+    assert bool(accept) and int(out.fault) == engine.RUNNING and int(out.stats.refined) == 1
+    spent = dataclasses.replace(undone, stats=undone.stats._replace(refined=jnp.asarray(engine.REFINE[1], jnp.int32)))
+    out, accept = chk(model, spent, sol, dsol, st.d)
+    assert bool(accept) and int(out.fault) == Status.STALLED and int(out.stats.refined) == engine.REFINE[1]
     assert int(jax.jit(engine.finish)(model, out, True).status) == Status.STALLED
     moved = dataclasses.replace(undone, d_star=st.d + model.h)
     out, accept = chk(model, moved, sol, dsol, st.d + model.h)
-    assert bool(accept) and int(out.fault) == engine.RUNNING
+    assert bool(accept) and int(out.fault) == engine.RUNNING and int(out.stats.refined) == 0
+
+
+def test_check_resolves_an_unsettled_set_again_with_a_finer_tolerance(model, touched):
+    """check: a set left ``unsettled`` after SETTLE_ITERS passes (a node still inside a tip) is
+    not accepted: the row stays in CHECK at d* with ``stats.refined`` raised, which gives the
+    hypothesis SETTLE_ITERS more passes at the finer tolerance; once REFINE[1] refinements are
+    spent, STALLED."""
+    st = _step(model, touched)
+    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
+                                              (s.d,), (jnp.ones_like(s.d),)))(model, st)
+    free = int(np.flatnonzero(np.asarray(st.nodes.mode) == FREE)[0])
+    sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS * model.gap_tol))
+    at = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
+                             added=jnp.full_like(st.added, -1), checks=jnp.asarray(engine.SETTLE_ITERS, jnp.int32))
+    chk = jax.jit(engine.check)
+    out, accept = chk(model, at, sunk, dsol, st.d)
+    assert not bool(accept) and int(out.fault) == engine.RUNNING and int(out.stats.refined) == 1
+    assert int(out.phase) == engine.CHECK and np.array_equal(out.nodes.mode, st.nodes.mode)
+    new_mode, *_ = jax.jit(engine._hypothesis)(model, out, sunk, dsol)      # more passes: it joins
+    assert int(new_mode[free]) == STICK
+    spent = dataclasses.replace(at, stats=at.stats._replace(refined=jnp.asarray(engine.REFINE[1], jnp.int32)),
+                                checks=jnp.asarray(engine.SETTLE_ITERS * (1 + engine.REFINE[1]), jnp.int32))
+    out, accept = chk(model, spent, sunk, dsol, st.d)
+    assert bool(accept) and int(out.fault) == Status.STALLED
 
 
 def test_a_check_pass_past_the_settle_limit_leaves_the_set_unsettled(model, touched):

@@ -467,21 +467,44 @@ def test_a_grip_node_that_peels_off_in_shrinking_cycles_is_followed_to_its_end()
     check_states(res, mesh, 0.5, "stick")
 
 
-def test_cycles_shorter_than_event_tol_stall_and_a_finer_event_tol_follows_them():
-    """docs/errors.md, STALLED: the same rectangle, nu = -0.9, r = 80 mm, grip nodes 14 and 21.
-    Grip node 21 peels off in cycles (1.048 to 1.118 mm), and again from 2.75 mm with nodes 21
-    and 22 in turn, where the cycles come closer than the default event_tol (step / 10,000,
-    12.8 nm): the engine cannot tell them apart at one depth and stops STALLED at 2.75 mm. With
-    event_tol = 1e-10 m it follows them, 88 events, event for event with the oracle (located to
-    1e-12 L), to 6.4 mm."""
+def test_a_node_that_sank_is_judged_where_it_joined():
+    """The same rectangle, nu = -0.9, r = 80 mm, grip nodes 14 and 21. Grip node 21 peels off in
+    cycles (1.048 to 1.118 mm), and again from 2.75 mm with nodes 21 and 22 in turn. At 2.7519 mm
+    node 21, released, sank 12.6 gap_tol into its tip and joined there pushing (4.9e-8 scaled),
+    to pull again 7.7e-8 deeper, within event_tol (1.6e-7 scaled): judged at d* + event_tol, as a
+    contact made by an A event is (its force at d* is the location's round-off), it pulled, was
+    released, sank, and joined again for 16 passes at one depth: STALLED. A node that joins
+    because it sank has a force of its own at d*, and is judged there; its B is the next
+    bracket's. The squeeze follows the cycles, 88 events, event for event with the oracle
+    (located to 1e-12 L), to 6.4 mm at the default event_tol (it needed 1e-10 m before)."""
     mesh = jsq.shapes.rectangle(0.08, 0.05, max_edge=0.005)
-    scene, res, o, L = _turning(mesh, -0.9, 0.08, (14, 21), None, 0.0064, None, model="stick")
-    assert res.outcome == jsq.Status.STALLED and 2.7e-3 < float(res.final_depth) < 2.8e-3
-    assert "event_tol" in res.outcome.advice
-    fine = jsq.squeeze(scene.replace(settings=jsq.Settings(event_tol=1e-10)))
-    assert fine.outcome.name == o.status == "SUCCESS" and len(o.events) == 88
-    _agree(fine, o, L, {"A", "B"})
-    check_states(fine, mesh, 0.5, "stick")
+    _, res, o, L = _turning(mesh, -0.9, 0.08, (14, 21), None, 0.0064, None, model="stick")
+    assert res.outcome.name == o.status == "SUCCESS" and len(o.events) == 88
+    assert int(res.stats.refined) == 0
+    _agree(res, o, L, {"A", "B"})
+    check_states(res, mesh, 0.5, "stick")
+
+
+def test_an_event_that_undoes_itself_within_event_tol_is_resolved_with_a_finer_one():
+    """Full stick on the L-shape (80 x 70 mm, 30 and 35 mm arms, 5 mm edges), nu = -0.9,
+    r = 80 mm, grip nodes 18 and 2, tips turning (random full-stick scene, 2026-12-05). Node 18
+    peels off in cycles that shrink from 25 µm to 4 nm (0.787 to 0.8139 mm), and node 1 from
+    101 µm to 19 nm later. At the default event_tol (step / 10,000, 24 nm) the cycle at 0.8125 mm
+    undid itself within it and the squeeze stopped there, STALLED. An event that undoes itself
+    within event_tol of its row, or a set that does not settle at one depth, is now resolved
+    again with event_tol / 10 (``engine.REFINE``: at most 6 times in a squeeze, float64):
+    twice here, counted in ``stats.refined``, and the squeeze reaches 12 mm, 44 events, event
+    for event with the oracle."""
+    mesh = jsq.shapes.polygon([(0, 0), (0.08, 0), (0.08, 0.03), (0.035, 0.03), (0.035, 0.07), (0, 0.07)],
+                              max_edge=0.005)
+    rot = [[0.0, 15.63, 0.18], [0.0, -12.84, -0.35]]
+    _, res, o, L = _turning(mesh, -0.9, 0.08, (18, 2), None, 0.012, rot, model="stick")
+    assert res.outcome.name == o.status == "SUCCESS" and len(o.events) == 44
+    assert int(res.stats.refined) == 2
+    _agree(res, o, L, {"A", "B"})
+    cycles = [round(d * 1e3, 4) for d, n, k, f in res.events.rows() if (n, k) == (18, "B")]
+    assert cycles == [0.7874, 0.8125, 0.8139, 0.8139, 0.8139]
+    check_states(res, mesh, 0.5, "stick")
 
 
 def test_a_rejected_contact_set_arms_no_sliding_node(pulling_meshes):
