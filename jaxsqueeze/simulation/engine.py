@@ -601,7 +601,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # carries a force of its own at d*, and is judged there: it pushes at d* and may pull again
     # a little deeper, a cycle that shrinks as it repeats; judged past d* it pulled at once,
     # and the cycle stalled at one depth (docs/numerics.md §2, 21 and 22)
-    probe = jnp.where(st.added > 0, 0.0, jnp.minimum(model.ev_tol, eta))
+    probe = jnp.where(st.added > 0, 0.0, jnp.clip(model.ev_tol, 1e3 * jnp.finfo(fn.dtype).eps, eta))
     pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32 else (sol.fn + probe * dsol.fn <= 0))
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test

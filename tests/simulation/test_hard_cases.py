@@ -623,6 +623,21 @@ def test_demo_at_the_widest_event_tolerance_squeezes_like_the_default():
     assert 0 < max(pulls) < tol / float(demo.depth) * np.abs(np.asarray(wide.forces)).max()
 
 
+
+def test_demo_at_an_event_tolerance_below_round_off_squeezes_like_the_default():
+    """``event_tol`` far below what float64 resolves (1e-300 m): a grip contact at the touch was
+    judged by its force at d = 0 + event_tol, i.e. by the round-off of a zero force, read as a
+    pull, and both let go: LOST_CONTACT at 0 mm (from about 1e-18 m on a 0.1 m square). The
+    probe past d* is now at least 1e3 eps (scaled units, as η's floor), and the bracket runs to
+    its iteration bound instead of to the tolerance: the same 60 events and final force."""
+    demo = scenefile.load(os.path.join(ROOT, "jaxsqueeze", "scenes", "foam_square.toml")).scene
+    ref = squeeze_ok(demo)
+    tiny = jsq.squeeze(demo.replace(settings=jsq.Settings(event_tol=1e-300)))
+    assert tiny.outcome == jsq.Status.SUCCESS, tiny.outcome.name
+    assert [(n, k) for d, n, k, f in tiny.events.rows()] == [(n, k) for d, n, k, f in ref.events.rows()]
+    F, F0 = np.asarray(tiny.total_force[-1]), np.asarray(ref.total_force[-1])
+    assert np.abs(F - F0).max() < 1e-9 * np.abs(F0).max()
+
 def test_one_object_squeezed_in_both_precisions_gets_an_operator_of_each():
     """A process that squeezes an object in float64 and then inside ``jax.enable_x64(False)``
     (the accuracy benchmark's precision knob) gets a float32 operator there, not the cached
