@@ -571,9 +571,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     event tested as a new contact on the next pass (by its force at d*), for at most
     ``SETTLE_ITERS`` passes (more after a refinement, :func:`check`). A node still inside, or
     a contact still peeling, after them is ``unsettled``: the check resolves the set again
-    with a finer ``event_tol`` or stops the squeeze with STALLED. Under Coulomb, once the new contacts hold, the armed sliding
-    contact whose slip rate is most reversed at d* sticks there, a D event
-    (:func:`_reversed`), one per pass.
+    with a finer ``event_tol`` or stops the squeeze with STALLED. Under Coulomb, once the new
+    contacts hold, the armed sliding contact whose slip rate is most reversed at d* sticks
+    there, a D event (:func:`_reversed`), one per pass.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
@@ -692,6 +692,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     # a finger left empty is no stall: the row is accepted and the squeeze ends, LOST_CONTACT
     held, _ = _per_finger(model, st.nodes.mode, st.nodes.finger)
     undone = jnp.all(st.nodes.mode == st.before) & (d_star <= st.d + model.ev_tol) & jnp.all(held > 0) & ~unsettled
+    # (a bracket narrower than 100 eps, in d <= 1, is round-off)
     refine = (undone | unsettled) & (st.stats.refined < REFINE[1]) & (st.fault == RUNNING) \
         & (model.ev_tol >= REFINE[0] * 100 * jnp.finfo(d_star.dtype).eps) \
         if d_star.dtype == jnp.float64 and model.cfg.friction_model != "frictionless" else False
