@@ -29,6 +29,12 @@ def model():
 _step = jax.jit(engine.step)
 
 
+@jax.jit
+def _solved(model, st):
+    """(solution, its derivative in d) of the state's contact set at its depth (one program)."""
+    return jax.jvp(lambda d: engine.contacts.solve(model, st.slots, st.nodes, d), (st.d,), (jnp.ones_like(st.d),))
+
+
 @pytest.fixture(scope="module")
 def first(model):
     return jax.jit(engine.init)(model)
@@ -387,8 +393,7 @@ def test_check_refines_then_stops_with_stalled_when_an_event_undoes_itself(model
     finish reports first), never a loop. The same pass with the depth moved on is accepted as a
     row, no refinement."""
     st = _step(model, touched)                                        # a row at d = h, phase ADVANCE
-    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
-                                              (s.d,), (jnp.ones_like(s.d),)))(model, st)
+    sol, dsol = _solved(model, st)
     undone = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
                                  added=jnp.full_like(st.added, -1), checks=jnp.asarray(0, jnp.int32))
     chk = jax.jit(engine.check)
@@ -409,8 +414,7 @@ def test_check_resolves_an_unsettled_set_again_with_a_finer_tolerance(model, tou
     hypothesis SETTLE_ITERS more passes at the finer tolerance; once REFINE[1] refinements are
     spent, STALLED."""
     st = _step(model, touched)
-    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
-                                              (s.d,), (jnp.ones_like(s.d),)))(model, st)
+    sol, dsol = _solved(model, st)
     free = int(np.flatnonzero(np.asarray(st.nodes.mode) == FREE)[0])
     sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS * model.gap_tol))
     at = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
@@ -433,8 +437,7 @@ def test_a_check_pass_past_the_settle_limit_leaves_the_set_unsettled(model, touc
     neither happens and the set is ``unsettled`` (check then stops with STALLED rather than
     accept a row with a node inside a tip or a contact pulling)."""
     st = _step(model, touched)                                        # the grip nodes in contact
-    sol, dsol = jax.jit(lambda m, s: jax.jvp(lambda d: engine.contacts.solve(m, s.slots, s.nodes, d),
-                                              (s.d,), (jnp.ones_like(s.d),)))(model, st)
+    sol, dsol = _solved(model, st)
     mode = np.asarray(st.nodes.mode)
     free, held = int(np.flatnonzero(mode == FREE)[0]), int(np.flatnonzero(mode > FREE)[0])
     sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS * model.gap_tol))
