@@ -564,7 +564,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     an older contact that pulls at d* (by more than ``PEEL_SHARE`` of the largest force: a
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
-    contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row); a contact made at
+    contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row) and neither
+    slides whole (that set ends it, SLIP_FAILURE, pulls and all: no sunk node joins it either); a contact made at
     d* whose force is rising, by a pull its rate makes up within ``event_tol``, is joining (d*
     lies before its touch by up to ``event_tol``), not peeling. With segment contacts, a free
     node found inside a fingertip (a release that dropped a shear force) joins there, an A
@@ -606,14 +607,18 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test
     theta, stuck, out, flip = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on), jnp.zeros_like(on)
-    held, _ = _per_finger(model, ns.mode, ns.finger)
+    held, slid = _per_finger(model, ns.mode, ns.finger)
+    # a set in which a finger's contacts all slide is the squeeze's end (SLIP_FAILURE, finish):
+    # its pulls and sunk nodes are that failure, not a set to settle; let go, they made it a
+    # LOST_CONTACT (a sliding point contact of a two-point grasp pulls, docs/numerics.md §2, 24)
+    going = jnp.all(held > 0) & ~(jnp.any(slid == held) if model.cfg.slip_events else False)
     # a release that drops a tangential force (full stick: a fingertip that turns drags its
     # contacts until one pulls) can land a free node inside a fingertip: it joins where it is,
     # an A event at d* (as the next step's event location would find it at d*), while both
     # fingers hold a contact (else the squeeze ends, LOST_CONTACT) and for at most
     # SETTLE_ITERS passes; one still inside after that is ``unsettled``: STALLED. (Point
     # contacts let the other nodes sink by design.)
-    sunk = (ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol) & jnp.all(held > 0) \
+    sunk = (ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol) & going \
         if model.cfg.contact == "segment" else jnp.zeros_like(on)
     budget = SETTLE_ITERS * (1 + st.stats.refined)                # (check: passes again after a refinement)
     join = sunk & (st.checks < budget)
@@ -659,7 +664,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # size, and their signs are no pull (they made a SLIP_FAILURE a LOST_CONTACT by chance)
     joining = (st.added >= 0) & (dsol.fn > 0) & (sol.fn + model.ev_tol * dsol.fn >= 0)
     scale = jnp.maximum(largest(sol.F), st.bracket.fmax)
-    peeling = on & ~joining & ~flip & (sol.fn < -share * scale) & jnp.all(held > 0)
+    peeling = on & ~joining & ~flip & (sol.fn < -share * scale) & going
     peeled = peeling & (st.checks < budget)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)
     stuck = stuck & ~peeled

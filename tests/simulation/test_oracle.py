@@ -266,6 +266,35 @@ def test_a_sliding_point_contact_that_carries_nothing_fails_by_slip():
     assert np.abs(np.asarray(res.final_forces)).max() < 1e-12 * np.abs(np.asarray(res.finger_forces)).max()
 
 
+def test_a_sliding_point_contact_that_pulls_fails_by_slip():
+    """The same triangle, grip nodes at (30, 70) and (36, 4) mm, both tips turning (-57 and
+    15 rad/m), r = 270 mm, mu = 0.5. Finger 0's contact leaves its cone at 1.99 mm (C); the
+    set with it sliding pulls at both contacts (by the squeeze's largest force): a set whose
+    finger slides whole is the squeeze's end, as in the oracle. The peel rule let both
+    contacts go there (C B B: LOST_CONTACT); it now leaves a failing set alone: SLIP_FAILURE at
+    the C, its row that set with the oracle's forces (random point-contact scenes, 2026-12-05:
+    8 of 9 such scenes ended LOST_CONTACT before; docs/numerics.md §2, 24)."""
+    mesh = jsq.shapes.polygon([(0, 0), (0.09, 0.01), (0.03, 0.07)], max_edge=0.02)     # 17 nodes
+    P = np.asarray(mesh.points) + np.asarray(mesh.offset)
+    grip = tuple(int(np.argmin(np.linalg.norm(P - xy, axis=1))) for xy in ((0.03, 0.07), (0.036, 0.004)))
+    rotation = [[-56.97, 0.0], [14.98, 0.0]]
+    scene = jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=0.3, thickness=H),
+                      fingers=jsq.Fingers(radius=0.27, rotation=rotation), grip=grip, friction=0.5,
+                      depth=0.018, contact="point")
+    res = jsq.squeeze(scene)
+    o = from_mesh(mesh, E, 0.3, H, 0.27, grip, 0.5, 0.018, contact="point", rotation=rotation, step=0.0018)
+    assert res.outcome.name == o.status == "SLIP_FAILURE"
+    L = float(np.ptp(mesh.points, axis=0).max())
+    assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L and 1.9e-3 < o.final_depth < 2.1e-3
+    _agree(res, o, L, "C")
+    k = int(res.count) - 1
+    on = np.asarray(res.modes[k]) > 0
+    x = np.asarray(mesh.points)[mesh.boundary] + np.asarray(res.boundary_displacement[k])      # the result's frame
+    rel = x[on] - np.asarray(res.centres[k])[np.asarray(res.finger[k])[on]]
+    fn = np.sum(np.asarray(res.forces[k])[on] * rel, axis=1) / np.linalg.norm(rel, axis=1)
+    assert fn.max() < -0.5 * np.abs(np.asarray(res.forces)).max()            # both pull: the set cannot hold
+
+
 # (mu, s [m], push [m], angle, outcome, push events' kinds); grip (7, 27), r = 20 mm, depth 10 mm
 PUSH = {
     "mu=0.5 push 3 mm along the normal (A; a new contact slides: C)":
