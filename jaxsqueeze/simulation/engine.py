@@ -69,7 +69,7 @@ DIP_TRIES = 4
 DRIFT_SHARE = 1e-2
 #: a free node this many gap tolerances inside a fingertip after an event joins there (event A)
 SUNK_TOLS = 10
-#: an event that undid itself within ``event_tol`` of the row it started from, or a contact set
+#: an event that undid itself within ``event_tol`` of the row the last event made, or a contact set
 #: that did not settle at one depth (a node that peels off in cycles shorter than the
 #: tolerance), is resolved again with the tolerance divided by REFINE[0], at most REFINE[1]
 #: times in a squeeze (float64, friction), before the squeeze stops STALLED (:func:`check`)
@@ -155,6 +155,7 @@ class State:
     ff0: jax.Array              # (F, 2) finger totals when the push began
     missed: jax.Array           # () int: ADVANCE solves in a row at a predicted crossing that found none
     limit: jax.Array            # () the next ADVANCE solve goes no deeper (a dip seen in a step), else +inf
+    d_ev: jax.Array             # () depth of the last row an event made (accepted in CHECK)
 
 
 def _with(st: State, **kw) -> State:
@@ -210,7 +211,7 @@ def init(model: Model) -> State:
         count=i32(0), stats=Stats(*(i32(0),) * 5, zero, *(i32(0),) * 5), squeeze_status=i32(RUNNING),
         squeeze_events=i32(0),
         margin=model.margin, grip=model.grip, invalid=model.invalid, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt),
-        missed=jnp.array(0, jnp.int32), limit=jnp.array(jnp.inf, dt))
+        missed=jnp.array(0, jnp.int32), limit=jnp.array(jnp.inf, dt), d_ev=zero)
 
 
 # ----------------------------------------------------------------------------- one iteration
@@ -314,7 +315,8 @@ def _accept(model: Model, st: State, sol: Solution, dsol: Solution, d) -> State:
         fault = jnp.where(off & (fault == RUNNING), Status.STALLED, fault).astype(jnp.int32)
     F, u, g = (jnp.where(start, a, 0.0) for a in (sol.F, sol.u, sol.g))
     st = _with(st, d=d, nodes=st.nodes._replace(theta=angle, armed=armed), angle=angle, F=F, u=u,
-               g=g, e=sol.e, de=dsol.e, stats=stats, phase=jnp.array(ADVANCE, jnp.int32), fault=fault)
+               g=g, e=sol.e, de=dsol.e, stats=stats, phase=jnp.array(ADVANCE, jnp.int32), fault=fault,
+               d_ev=jnp.where(st.phase == CHECK, d, st.d_ev))
     return finish(model, st, sol.ok)
 
 
@@ -678,7 +680,7 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
 def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     """Phase CHECK: the new contact set solved at d*. Test it by hypothesis; if that changed
     it, update the slots and solve again at d*; else accept the row. An event that undid itself
-    at the depth it started from, within event_tol, would repeat forever; so would a set that
+    within event_tol of the row the last event made would repeat forever; so would a set that
     does not settle (``unsettled``). Either is first resolved again with event_tol / REFINE[0]
     (the row accepted and its event located anew, or the set checked again at d*), at most
     REFINE[1] times in a squeeze, then stops the squeeze with STALLED (a finger left without
@@ -696,7 +698,9 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
 
     # a finger left empty is no stall: the row is accepted and the squeeze ends, LOST_CONTACT
     held, _ = _per_finger(model, st.nodes.mode, st.nodes.finger)
-    undone = jnp.all(st.nodes.mode == st.before) & (d_star <= st.d + model.ev_tol) & jnp.all(held > 0) & ~unsettled
+    # (measured from the last event's row: a step predicted to the next event may stop short of
+    # it by less than event_tol, and a cycle that follows is no event undone, docs/numerics.md §2, 25)
+    undone = jnp.all(st.nodes.mode == st.before) & (d_star <= st.d_ev + model.ev_tol) & jnp.all(held > 0) & ~unsettled
     # (a bracket narrower than 100 eps, in d <= 1, is round-off)
     refine = (undone | unsettled) & (st.stats.refined < REFINE[1]) & (st.fault == RUNNING) \
         & (model.ev_tol >= REFINE[0] * 100 * jnp.finfo(d_star.dtype).eps) \
@@ -786,8 +790,8 @@ def start_push(model: Model, st: State) -> State:
     status = jnp.where(st.status == Status.SUCCESS, go, st.status).astype(jnp.int32)
     hist = list(st.hist)
     hist[6] = hist[6].at[:, 2].set(model.base[2])       # the pusher waits at its start in squeeze rows
-    return _with(st, d=jnp.zeros_like(st.d), status=status, squeeze_status=st.status, hist=tuple(hist),
-                 phase=jnp.array(PRIME, jnp.int32), ff0=st.ff)
+    return _with(st, d=jnp.zeros_like(st.d), d_ev=jnp.zeros_like(st.d), status=status, squeeze_status=st.status,
+                 hist=tuple(hist), phase=jnp.array(PRIME, jnp.int32), ff0=st.ff)
 
 
 def let_go(model: Model, st: State) -> State:

@@ -386,16 +386,17 @@ def test_kept_inverse_stays_exact_over_many_contact_changes():
 
 
 def test_check_refines_then_stops_with_stalled_when_an_event_undoes_itself(model, touched):
-    """check: after an event at the depth the squeeze already stood at, a contact set that came
-    back to the modes from before the event would repeat forever. It is accepted as a row with
-    ``stats.refined`` raised (the loop divides event_tol by REFINE[0] per refinement, and the
-    next step locates the event anew), at most REFINE[1] times; then STALLED (a fault that
-    finish reports first), never a loop. The same pass with the depth moved on is accepted as a
-    row, no refinement."""
+    """check: after an event at the depth where the last event left the squeeze, a contact set
+    that came back to the modes from before the event would repeat forever. It is accepted as a
+    row with ``stats.refined`` raised (the loop divides event_tol by REFINE[0] per refinement,
+    and the next step locates the event anew), at most REFINE[1] times; then STALLED (a fault
+    that finish reports first), never a loop. The same pass with the depth moved on is accepted
+    as a row, no refinement; so is one whose row before was a step that stopped just short of
+    the event, the last event's row a step behind (a cycle, not an event undone)."""
     st = _step(model, touched)                                        # a row at d = h, phase ADVANCE
     sol, dsol = _solved(model, st)
     undone = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
-                                 added=jnp.full_like(st.added, -1), checks=jnp.asarray(0, jnp.int32))
+                                 added=jnp.full_like(st.added, -1), checks=jnp.asarray(0, jnp.int32), d_ev=st.d)
     chk = jax.jit(engine.check)
     out, accept = chk(model, undone, sol, dsol, st.d)
     assert bool(accept) and int(out.fault) == engine.RUNNING and int(out.stats.refined) == 1
@@ -405,6 +406,9 @@ def test_check_refines_then_stops_with_stalled_when_an_event_undoes_itself(model
     assert int(jax.jit(engine.finish)(model, out, True).status) == Status.STALLED
     moved = dataclasses.replace(undone, d_star=st.d + model.h)
     out, accept = chk(model, moved, sol, dsol, st.d + model.h)
+    assert bool(accept) and int(out.fault) == engine.RUNNING and int(out.stats.refined) == 0
+    short = dataclasses.replace(undone, d_ev=st.d - model.h)
+    out, accept = chk(model, short, sol, dsol, st.d)
     assert bool(accept) and int(out.fault) == engine.RUNNING and int(out.stats.refined) == 0
 
 
