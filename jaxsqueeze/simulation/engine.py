@@ -567,9 +567,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     release that loaded a neighbour into tension, a finger peeling off) lets go there too, a B
     event (``peeled``), for at most ``SETTLE_ITERS`` passes and while both fingers hold a
     contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row) and neither
-    slides whole (that set ends it, SLIP_FAILURE, pulls and all: no sunk node joins it either); a contact made at
-    d* whose force is rising, by a pull its rate makes up within ``event_tol``, is joining (d*
-    lies before its touch by up to ``event_tol``), not peeling. With segment contacts, a free
+    slides whole (that set ends it, SLIP_FAILURE, pulls and all: no sunk node joins it
+    either); a contact made at d* whose force is rising, by a pull its rate makes up within
+    ``event_tol``, is joining (d* lies before its touch by up to ``event_tol``), not peeling. With segment contacts, a free
     node found inside a fingertip (a release that dropped a shear force) joins there, an A
     event tested as a new contact on the next pass (by its force at d*), for at most
     ``SETTLE_ITERS`` passes (more after a refinement, :func:`check`). A node still inside, or
