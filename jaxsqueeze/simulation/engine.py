@@ -569,14 +569,14 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     contact (a finger left empty ends the squeeze, LOST_CONTACT, at that row) and neither
     slides whole (that set ends it, SLIP_FAILURE, pulls and all: no sunk node joins it
     either); a contact made at d* whose force is rising, by a pull its rate makes up within
-    ``event_tol``, is joining (d* lies before its touch by up to ``event_tol``), not peeling. With segment contacts, a free
-    node found inside a fingertip (a release that dropped a shear force) joins there, an A
-    event tested as a new contact on the next pass (by its force at d*), for at most
-    ``SETTLE_ITERS`` passes (more after a refinement, :func:`check`). A node still inside, or
-    a contact still peeling, after them is ``unsettled``: the check resolves the set again
-    with a finer ``event_tol`` or stops the squeeze with STALLED. Under Coulomb, once the new
-    contacts hold, the armed sliding contact whose slip rate is most reversed at d* sticks
-    there, a D event (:func:`_reversed`), one per pass.
+    ``event_tol``, is joining (d* lies before its touch by up to ``event_tol``), not peeling.
+    With segment contacts, a free node found inside a fingertip (a release that dropped a shear
+    force) joins there, an A event tested as a new contact on the next pass (by its force at
+    d*), for at most ``SETTLE_ITERS`` passes (more after a refinement, :func:`check`). A node
+    still inside, or a contact still peeling, after them is ``unsettled``: the check resolves
+    the set again with a finer ``event_tol`` or stops the squeeze with STALLED. Under Coulomb,
+    once the new contacts hold, the armed sliding contact whose slip rate is most reversed at
+    d* sticks there, a D event (:func:`_reversed`), one per pass.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
