@@ -62,8 +62,8 @@ optional is required; unknown keys, at any level, are errors)::
     gap_tol = 1e-10                # penetration tolerance for event A [m]
     capacity = 64                  # contact slots (default: chosen, grown on overflow)
     sliding_capacity = 16          # sliding contacts in the Newton system (default: chosen, grown)
-    max_steps = 400                # loop iteration bound
-    max_events = 256               # event log size
+    max_steps = 400                # loop iteration bound (default: 400, grown x4 up to 6,400)
+    max_events = 256               # event log size (default: 256, grown x4 up to 4,096)
     newton_iters = 30
     bisect_iters = 40
     fused = false                  # the squeeze loop as one CPU kernel: ~40 % faster squeezes
@@ -467,7 +467,7 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
                 if settings_ok and not _bad(method):
                     s0 = Settings(**settings)
                     for msg in validate.check_costs(int(m_est), int(n_tri / 2 + m_est), method, s0.slots(int(m_est)),
-                                                    s0.max_steps, s0.max_events, dtype):
+                                                    *s0.bounds(), dtype):
                         errs.add(SceneFileError(_cost_key(msg), msg + " (estimated before meshing)"))
             if not errs.errors:
                 made = errs.run(_object, tables["object"], base, grip_points, (max_edge, refine_edge))

@@ -20,7 +20,7 @@ from .. import compiler
 from ..tracing import as_array, differentiated, forward_levels, is_concrete, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
-from .scene import Scene, stiffness_of
+from .scene import EVENTS, LOG_GROWTH, STEPS, Scene, stiffness_of
 from .status import Status
 
 
@@ -40,7 +40,7 @@ def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config
     sliding = 0 if scene.friction_model == "stick" or auto_all else s.sliding(capacity, eager)
     return Config(friction_model=scene.friction_model, contact=scene.contact,
                   rotation=scene.fingers.rotation is not None, capacity=capacity, sliding=sliding,
-                  max_steps=int(s.max_steps), max_events=int(s.max_events),
+                  max_steps=s.bounds()[0], max_events=s.bounds()[1],
                   newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
                   placement=scene.placement is not None, adversary=scene.adversary is not None,
                   history=history,
@@ -162,7 +162,8 @@ def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
     return run(*leaves)
 
 
-#: the configuration an eager squeeze grew to, by object size, capacity settings and the rest of its configuration
+#: the contact and sliding slots an eager squeeze grew to, by object size, capacity settings
+#: and the rest of its configuration
 _GROWN: dict = {}
 
 
@@ -170,7 +171,8 @@ def eager_config(scene: Scene, op: Compliance, history: bool = True) -> Config:
     """The configuration an eager :func:`squeeze` of ``scene`` starts with: its automatic
     capacities, or what an earlier squeeze of the same object in this process grew them to."""
     cfg = config_of(scene, history, eager=True)
-    return _GROWN.get(_grow_key(scene, op, cfg), cfg)
+    slots = _GROWN.get(_grow_key(scene, op, cfg))
+    return cfg if slots is None else dataclasses.replace(cfg, capacity=slots[0], sliding=slots[1])
 
 
 def _grow_key(scene: Scene, op: Compliance, cfg: Config):
@@ -179,6 +181,17 @@ def _grow_key(scene: Scene, op: Compliance, cfg: Config):
 
 
 def _grown(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Config | None:
+    """The configuration to squeeze again with after an eager squeeze ``res`` ran out of an
+    automatic bound (:func:`_more_slots`, :func:`_longer`), or None."""
+    status = int(res.status)
+    if status == Status.OVERFLOW:
+        return _more_slots(scene, op, cfg, res)
+    if status in (Status.MAX_STEPS, Status.EVENT_OVERFLOW):
+        return _longer(scene, cfg, res)
+    return None
+
+
+def _more_slots(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Config | None:
     """``cfg`` with the automatic capacities that ran out grown to at least twice their size
     and to what ``res`` asked for (``res.stats.contacts`` / ``sliding``: the set that
     overflowed; contact slots up to the boundary node count and the memory limit, sliding
@@ -202,6 +215,33 @@ def _grown(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Con
     if (capacity, slide) == (cfg.capacity, cfg.sliding):
         return None
     return dataclasses.replace(cfg, capacity=capacity, sliding=slide)
+
+
+def _longer(scene: Scene, cfg: Config, res: SqueezeResult) -> Config | None:
+    """``cfg`` with its automatic loop and event-log bounds (``Settings.max_steps`` /
+    ``max_events`` at None) ``LOG_GROWTH`` times longer (loop bound: enough for the rows that
+    ``res`` took per metre, to the target depth) after ``res`` stopped MAX_STEPS or
+    EVENT_OVERFLOW; None when the bound that ran out is set by the settings, or would pass
+    ``LOG_GROWTH ** 2`` times its start (a step far too small for the depth) or the memory
+    limit."""
+    s = scene.settings
+    steps_out = int(res.status) == Status.MAX_STEPS
+    if (s.max_steps if steps_out else s.max_events) is not None:
+        return None
+    grow = LOG_GROWTH
+    if steps_out:
+        reached = float(res.final_depth)
+        need = int(res.count) * float(scene.depth) / reached if reached > 0 else np.inf
+        while cfg.max_steps * grow < need and grow <= LOG_GROWTH ** 2:
+            grow *= LOG_GROWTH
+    steps = cfg.max_steps * grow if s.max_steps is None else cfg.max_steps
+    events = cfg.max_events * grow if s.max_events is None else cfg.max_events
+    if max(steps / STEPS, events / EVENTS) > LOG_GROWTH ** 2:
+        return None
+    if validate.scene_cost_problems(scene.replace(settings=dataclasses.replace(
+            s, capacity=cfg.capacity, max_steps=steps, max_events=events))):
+        return None
+    return dataclasses.replace(cfg, max_steps=steps, max_events=events)
 
 
 REVERSE_MODE = (
@@ -297,13 +337,15 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     op, grasp = _prepare(scene, op, concrete)
     cfg = eager_config(scene, op, history) if concrete else config_of(scene, history)
     res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
-    while concrete and np.ndim(res.status) == 0 and int(res.status) == Status.OVERFLOW:
-        # an automatic capacity ran out: more slots (a new program), remembered for the next
-        # squeeze of this object in this process
+    key = _grow_key(scene, op, cfg) if concrete else None
+    while concrete and np.ndim(res.status) == 0:
+        # an automatic bound ran out: squeeze again with more (a new program); more slots are
+        # remembered for the next squeeze of this object in this process, a longer loop is not
         bigger = _grown(scene, op, cfg, res)
         if bigger is None:
             break
-        _GROWN[_grow_key(scene, op, cfg)] = bigger
+        if int(res.status) == Status.OVERFLOW:
+            _GROWN[key] = (bigger.capacity, bigger.sliding)
         cfg = bigger
         res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     if concrete and np.ndim(res.status) == 0:

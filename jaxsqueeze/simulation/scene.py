@@ -158,6 +158,10 @@ TRACED_SLOTS = 64
 #: sliding contacts an eager Coulomb squeeze solves for under ``Settings.sliding_capacity = None``
 #: (doubled on overflow)
 EAGER_SLIDING = 8
+#: loop iterations and event-log rows of a squeeze under ``Settings.max_steps`` / ``max_events``
+#: ``= None``; an eager squeeze multiplies them by ``LOG_GROWTH`` when they run out, up to
+#: ``LOG_GROWTH ** 2`` times (6,400 and 4,096)
+STEPS, EVENTS, LOG_GROWTH = 400, 256, 4
 #: the largest ``Settings.newton_iters`` and ``bisect_iters``: a bisection from one metre
 #: reaches float64's smallest numbers in ~1,100 halvings (the loops count in int32)
 MAX_ITERS = 10_000
@@ -188,8 +192,14 @@ class Settings:
         solves up to 8 (a frictionless one, eager or traced, 16) in a compact system and falls
         back to one over all slots (both compiled). One system is a smaller program (compiles
         faster) and a smaller one runs faster.
-    max_steps: bound on loop iterations (steps plus event resolutions), static.
-    max_events: capacity of the event log, static.
+    max_steps: bound on loop iterations (steps plus event resolutions), static; more give
+        ``Status.MAX_STEPS``. ``None`` (default): 400, and an eager squeeze that runs out of
+        them (or of ``max_events``) squeezes again with 4 times as many, up to 16 times
+        (6,400; the same result, a program per size); a traced one keeps 400.
+    max_events: capacity of the event log, static; more events give
+        ``Status.EVENT_OVERFLOW``. ``None`` (default): 256, grown like ``max_steps`` (up
+        to 4,096) eagerly. Some full-stick squeezes, where a few nodes touch and leave again
+        and again, need hundreds.
     newton_iters: Newton iteration bound, static, at most ``MAX_ITERS``.
     bisect_iters: iteration bound for locating an event (regula falsi + bisection), static,
         at most ``MAX_ITERS``.
@@ -213,8 +223,8 @@ class Settings:
     gap_tol: float | None = None
     capacity: int | None = field(default=None, metadata=dict(static=True))
     sliding_capacity: int | None = field(default=None, metadata=dict(static=True))
-    max_steps: int = field(default=400, metadata=dict(static=True))
-    max_events: int = field(default=256, metadata=dict(static=True))
+    max_steps: int | None = field(default=None, metadata=dict(static=True))
+    max_events: int | None = field(default=None, metadata=dict(static=True))
     newton_iters: int = field(default=30, metadata=dict(static=True))
     bisect_iters: int = field(default=40, metadata=dict(static=True))
     fused: bool = field(default=False, metadata=dict(static=True))
@@ -233,6 +243,12 @@ class Settings:
         if self.sliding_capacity is not None:
             return min(int(self.sliding_capacity), int(capacity))
         return min(EAGER_SLIDING, int(capacity)) if eager else 0
+
+    def bounds(self) -> tuple[int, int]:
+        """(max_steps, max_events) a squeeze starts with: the settings', ``STEPS`` and
+        ``EVENTS`` under ``None``."""
+        return (STEPS if self.max_steps is None else int(self.max_steps),
+                EVENTS if self.max_events is None else int(self.max_events))
 
 
 @jax.tree_util.register_dataclass
@@ -334,7 +350,7 @@ class Scene:
             raise ValueError(f"Settings.fused={s.fused!r} must be True or False.")
         for name in ("capacity", "sliding_capacity", "max_steps", "max_events", "newton_iters", "bisect_iters"):
             v = getattr(s, name)
-            if name in ("capacity", "sliding_capacity") and v is None:
+            if name in ("capacity", "sliding_capacity", "max_steps", "max_events") and v is None:
                 continue
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"Settings.{name}={v!r} must be a positive integer.")

@@ -426,6 +426,52 @@ def test_step_bound_returns_max_steps():
     assert "max_steps" in res.outcome.advice
 
 
+def test_an_eager_squeeze_that_runs_out_of_steps_squeezes_again_with_more():
+    """Settings.max_steps = None: 400 loop iterations, and an eager squeeze that needs more
+    squeezes again with 1,600 (the same squeeze: its first 401 rows are those of max_steps =
+    400 set, which stops MAX_STEPS); a bound the settings set does not grow."""
+    fine = base_scene(settings=jsq.Settings(step=0.012 / 450))
+    res = squeeze_ok(fine)
+    assert int(res.count) > 401 and res.final_depth == pytest.approx(0.012, abs=1e-12)
+    cut = squeeze_ok(fine.replace(settings=jsq.Settings(step=0.012 / 450, max_steps=400)), (jsq.Status.MAX_STEPS,))
+    assert int(cut.count) == 401
+    np.testing.assert_array_equal(cut.forces, res.forces[:401])
+    np.testing.assert_array_equal(cut.modes, res.modes[:401])
+
+
+def test_automatic_loop_bounds_grow_fourfold_up_to_sixteen_times(monkeypatch):
+    """The rule behind the rerun (``api._longer``): both automatic bounds x4 when either runs
+    out, up to 6,400 steps and 4,096 events, the loop bound enough for the target depth at
+    the pace of the rows so far (none when not even 6,400 are: a step far too small); a
+    bound the settings set neither grows nor lets the squeeze rerun when it is the one that
+    ran out; nothing beyond the memory limit."""
+    import types
+    from jaxsqueeze.simulation import scene as scene_mod, validate
+
+    def stop(status, rows=401, reached=0.006):            # a squeeze to 12 mm stopped at 6 mm
+        return types.SimpleNamespace(status=status, count=rows, final_depth=reached)
+
+    S, E = stop(jsq.Status.MAX_STEPS), stop(jsq.Status.EVENT_OVERFLOW)
+    sc = base_scene()
+    cfg = grasp_mod.config_of(sc, eager=True)
+    assert (cfg.max_steps, cfg.max_events) == (scene_mod.STEPS, scene_mod.EVENTS) == (400, 256)
+    assert grasp_mod.config_of(sc).max_events == 256                   # traced: the same start, no rerun
+    longer = grasp_mod._longer(sc, cfg, S)
+    longest = grasp_mod._longer(sc, longer, E)
+    assert [(c.max_steps, c.max_events) for c in (longer, longest)] == [(1600, 1024), (6400, 4096)]
+    assert longest.capacity == cfg.capacity and grasp_mod._longer(sc, longest, S) is None
+    for reached, bounds in ((0.002, (6400, 4096)), (0.0007, None), (0.0, None)):   # 2,400 / 6,900 / no rows per 12 mm
+        grown = grasp_mod._longer(sc, cfg, stop(jsq.Status.MAX_STEPS, reached=reached))
+        assert bounds == (grown and (grown.max_steps, grown.max_events))
+    fixed = sc.replace(settings=jsq.Settings(max_steps=500))
+    c = grasp_mod.config_of(fixed, eager=True)
+    assert grasp_mod._longer(fixed, c, S) is None
+    assert (grasp_mod._longer(fixed, c, E).max_steps, grasp_mod._longer(fixed, c, E).max_events) == (500, 1024)
+    monkeypatch.setattr(validate, "MEMORY_LIMIT", 2 * validate.history_bytes(56, cfg.capacity, 400, 256))
+    assert len(sc.boundary_nodes()) == 56 and validate.scene_cost_problems(sc) == []
+    assert grasp_mod._longer(sc, cfg, E) is None
+
+
 def test_too_few_slots_gives_overflow_with_advice():
     res = jsq.squeeze(base_scene(settings=jsq.Settings(capacity=2)))
     assert res.outcome == jsq.Status.OVERFLOW, res.outcome.name

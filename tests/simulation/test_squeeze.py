@@ -440,9 +440,9 @@ def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monke
     res = jsq.squeeze(slanted)
     assert res.outcome == jsq.Status.SUCCESS
     assert np.max(np.sum(res.modes > 0, axis=1)) > 4 and np.max(np.sum(res.modes >= 2, axis=1)) > 1
-    (grown,) = grasp_mod._GROWN.values()
-    assert grown.capacity == 8 and grown.sliding >= 4
-    fixed = jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=8, sliding_capacity=grown.sliding)))
+    ((capacity, sliding),) = grasp_mod._GROWN.values()
+    assert capacity == 8 and sliding >= 4
+    fixed = jsq.squeeze(slanted.replace(settings=jsq.Settings(capacity=8, sliding_capacity=sliding)))
     np.testing.assert_array_equal(res.modes, fixed.modes)
     np.testing.assert_array_equal(res.forces, fixed.forces)
     # stats count the largest contact and sliding sets: the smallest capacities that run it
