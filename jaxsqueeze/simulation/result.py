@@ -41,8 +41,9 @@ class EventLog(NamedTuple):
     by a C at the same depth (a grip node's C is at depth 0).
 
     An eager squeeze's log holds its events only. The log of a result from ``jax.jit`` or
-    ``squeeze(..., trim=False)`` keeps its fixed capacity (``Settings.max_events`` rows, the
-    first ``result.n_events`` valid; the padding has node, kind and finger -1): read
+    ``squeeze(..., trim=False)`` keeps its fixed capacity (the ``max_events`` it ran with:
+    ``Settings.bounds()``, or more where an eager squeeze grew it; the first
+    ``result.n_events`` valid; the padding has node, kind and finger -1): read
     ``result.trim().events``.
     """
 
@@ -70,9 +71,9 @@ class SqueezeResult:
     """Outcome of a squeeze, in SI units, frame of ``mesh.points`` (node centroid at the origin).
 
     One type however it was computed. Rows k index the recorded states: the initial touch,
-    every step and every event. The arrays have a fixed capacity (``Settings.max_steps + 1``
-    rows, ``Settings.max_events`` events); ``count`` and ``n_events`` say how many are valid
-    and padding rows repeat the last valid one. :func:`jaxsqueeze.squeeze` called eagerly on
+    every step and every event. The arrays have a fixed capacity (``max_steps + 1`` rows and
+    ``max_events`` events of ``Settings.bounds()``, or more where an eager squeeze grew them);
+    ``count`` and ``n_events`` say how many are valid and padding rows repeat the last valid one. :func:`jaxsqueeze.squeeze` called eagerly on
     one scene returns the result *trimmed* to its valid rows as numpy arrays (``trim=False``
     keeps the padding); under ``jit``/``vmap``/``jvp`` it is padded. The properties below
     (``final_depth``, ``final_forces``, ``total_force``, ``outcome``) honour ``count`` and

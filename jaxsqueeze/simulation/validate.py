@@ -584,7 +584,8 @@ def check_costs(m: int, n: int, method: str, capacity: int, max_steps: int, max_
                  "capacity": history_bytes(m, capacity, 0, 0, dtype)}
         dom = max(parts, key=parts.get)
         value = {"max_steps": max_steps, "max_events": max_events, "capacity": capacity}
-        default = {"max_steps": "None: 400, grown", "max_events": "None: 256, grown", "capacity": "None: chosen"}
+        default = {"max_steps": "None: 400, grown", "max_events": "None: 256, grown",
+                   "capacity": "None: chosen"}
         out.append(f"settings.{dom} = {value[dom]}: the history, event log and contact slots would take about "
                    f"{gib(hb)} (max_steps = {max_steps}, max_events = {max_events}, capacity = {capacity}; limit "
                    f"{gib(limit)}, jaxsqueeze.simulation.validate.MEMORY_LIMIT / env JAXSQUEEZE_MEMORY_LIMIT); "

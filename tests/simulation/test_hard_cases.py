@@ -433,7 +433,8 @@ def test_an_eager_squeeze_that_runs_out_of_steps_squeezes_again_with_more():
     fine = base_scene(settings=jsq.Settings(step=0.012 / 450))
     res = squeeze_ok(fine)
     assert int(res.count) > 401 and res.final_depth == pytest.approx(0.012, abs=1e-12)
-    cut = squeeze_ok(fine.replace(settings=jsq.Settings(step=0.012 / 450, max_steps=400)), (jsq.Status.MAX_STEPS,))
+    cut = squeeze_ok(fine.replace(settings=jsq.Settings(step=0.012 / 450, max_steps=400)),
+                     (jsq.Status.MAX_STEPS,))
     assert int(cut.count) == 401
     np.testing.assert_array_equal(cut.forces, res.forces[:401])
     np.testing.assert_array_equal(cut.modes, res.modes[:401])
@@ -460,13 +461,15 @@ def test_automatic_loop_bounds_grow_fourfold_up_to_sixteen_times(monkeypatch):
     longest = grasp_mod._longer(sc, longer, E)
     assert [(c.max_steps, c.max_events) for c in (longer, longest)] == [(1600, 1024), (6400, 4096)]
     assert longest.capacity == cfg.capacity and grasp_mod._longer(sc, longest, S) is None
-    for reached, bounds in ((0.002, (6400, 4096)), (0.0007, None), (0.0, None)):   # 2,400 / 6,900 / no rows per 12 mm
+    # 2,400 / 6,900 / endless rows to 12 mm
+    for reached, bounds in ((0.002, (6400, 4096)), (0.0007, None), (0.0, None)):
         grown = grasp_mod._longer(sc, cfg, stop(jsq.Status.MAX_STEPS, reached=reached))
         assert bounds == (grown and (grown.max_steps, grown.max_events))
     fixed = sc.replace(settings=jsq.Settings(max_steps=500))
     c = grasp_mod.config_of(fixed, eager=True)
     assert grasp_mod._longer(fixed, c, S) is None
-    assert (grasp_mod._longer(fixed, c, E).max_steps, grasp_mod._longer(fixed, c, E).max_events) == (500, 1024)
+    events_out = grasp_mod._longer(fixed, c, E)
+    assert (events_out.max_steps, events_out.max_events) == (500, 1024)
     monkeypatch.setattr(validate, "MEMORY_LIMIT", 2 * validate.history_bytes(56, cfg.capacity, 400, 256))
     assert len(sc.boundary_nodes()) == 56 and validate.scene_cost_problems(sc) == []
     assert grasp_mod._longer(sc, cfg, E) is None
