@@ -219,8 +219,8 @@ def _more_slots(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -
 
 def _longer(scene: Scene, cfg: Config, res: SqueezeResult) -> Config | None:
     """``cfg`` with its automatic loop and event-log bounds (``Settings.max_steps`` /
-    ``max_events`` at None) ``LOG_GROWTH`` times longer (loop bound: enough for the rows that
-    ``res`` took per metre, to the target depth) after ``res`` stopped MAX_STEPS or
+    ``max_events`` at None) ``LOG_GROWTH`` times longer (loop bound: enough for the target
+    depth at the rows per metre that ``res`` took) after ``res`` stopped MAX_STEPS or
     EVENT_OVERFLOW; None when the bound that ran out is set by the settings, or would pass
     ``LOG_GROWTH ** 2`` times its start (a step far too small for the depth) or the memory
     limit."""
@@ -231,7 +231,7 @@ def _longer(scene: Scene, cfg: Config, res: SqueezeResult) -> Config | None:
     grow = LOG_GROWTH
     if steps_out:
         reached = float(res.final_depth)
-        need = int(res.count) * float(scene.depth) / reached if reached > 0 else np.inf
+        need = (cfg.max_steps + 1) * float(scene.depth) / reached if reached > 0 else np.inf
         while cfg.max_steps * grow < need and grow <= LOG_GROWTH ** 2:
             grow *= LOG_GROWTH
     steps = cfg.max_steps * grow if s.max_steps is None else cfg.max_steps

@@ -449,8 +449,8 @@ def test_automatic_loop_bounds_grow_fourfold_up_to_sixteen_times(monkeypatch):
     import types
     from jaxsqueeze.simulation import scene as scene_mod, validate
 
-    def stop(status, rows=401, reached=0.006):            # a squeeze to 12 mm stopped at 6 mm
-        return types.SimpleNamespace(status=status, count=rows, final_depth=reached)
+    def stop(status, reached=0.006):            # a squeeze to 12 mm stopped at 6 mm
+        return types.SimpleNamespace(status=status, final_depth=reached)
 
     S, E = stop(jsq.Status.MAX_STEPS), stop(jsq.Status.EVENT_OVERFLOW)
     sc = base_scene()
