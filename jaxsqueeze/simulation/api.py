@@ -38,9 +38,10 @@ def config_of(scene: Scene, history: bool = True, eager: bool = False) -> Config
     # every frictionless contact slides: without a sliding capacity it keeps both systems
     auto_all = scene.friction_model == "frictionless" and s.sliding_capacity is None
     sliding = 0 if scene.friction_model == "stick" or auto_all else s.sliding(capacity, eager)
+    max_steps, max_events = s.bounds()
     return Config(friction_model=scene.friction_model, contact=scene.contact,
                   rotation=scene.fingers.rotation is not None, capacity=capacity, sliding=sliding,
-                  max_steps=s.bounds()[0], max_events=s.bounds()[1],
+                  max_steps=max_steps, max_events=max_events,
                   newton_iters=int(s.newton_iters), bisect_iters=int(s.bisect_iters),
                   placement=scene.placement is not None, adversary=scene.adversary is not None,
                   history=history,
