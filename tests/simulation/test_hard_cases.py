@@ -420,22 +420,17 @@ def test_a_release_that_lands_a_node_inside_a_fingertip_rejoins_until_it_comes_f
     assert res.modes[at][k] == 0 and gap(at) > -SUNK_TOLS * 1e-9 * 0.1
 
 
-def test_step_bound_returns_max_steps():
-    res = squeeze_ok(base_scene(settings=jsq.Settings(max_steps=3)), (jsq.Status.MAX_STEPS,))
-    assert res.final_depth < 0.012 and int(res.count) == 4
-    assert "max_steps" in res.outcome.advice
-
-
 def test_an_eager_squeeze_that_runs_out_of_steps_squeezes_again_with_more():
     """Settings.max_steps = None: 400 loop iterations, and an eager squeeze that needs more
     squeezes again with 1,600 (the same squeeze: its first 401 rows are those of max_steps =
-    400 set, which stops MAX_STEPS); a bound the settings set does not grow."""
+    400 set, which stops MAX_STEPS after 401 rows, advice naming max_steps); a bound the
+    settings set does not grow."""
     fine = base_scene(settings=jsq.Settings(step=0.012 / 450))
     res = squeeze_ok(fine)
     assert int(res.count) > 401 and res.final_depth == pytest.approx(0.012, abs=1e-12)
     cut = squeeze_ok(fine.replace(settings=jsq.Settings(step=0.012 / 450, max_steps=400)),
                      (jsq.Status.MAX_STEPS,))
-    assert int(cut.count) == 401
+    assert int(cut.count) == 401 and cut.final_depth < 0.012 and "max_steps" in cut.outcome.advice
     np.testing.assert_array_equal(cut.forces, res.forces[:401])
     np.testing.assert_array_equal(cut.modes, res.modes[:401])
 
