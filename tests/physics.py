@@ -11,6 +11,15 @@ import jaxsqueeze as jsq
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def peel_scene():
+    """Full stick on an ellipse 100 x 60 mm (5 mm edges), nu = -0.9, fingertips of 100 mm, grip
+    nodes 43 and 48, 8 mm deep: a node next to a grip node touches and peels off again in
+    cycles (float64: 8 A and 8 B events, SUCCESS)."""
+    mesh = jsq.shapes.ellipse(0.05, 0.03, max_edge=0.005)
+    return jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=-0.9, thickness=0.0254), friction_model="stick",
+                     fingers=jsq.Fingers(radius=0.1), grip=(43, 48), friction=0.5, depth=0.008)
+
+
 def hexagon_scene():
     """A coarse hexagon 80 mm across (7 mm edges), nu = -0.9, mu = 1, fingertips of 3 L: node 30
     joins finger 1 at 0.73 mm with a force rate 0.0034 rad outside its cone (float32 once kept it

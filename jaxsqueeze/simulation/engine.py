@@ -67,8 +67,11 @@ DIP_TRIES = 4
 #: below this fraction of the row's largest contact force (docs/numerics.md §5.1); beyond it the
 #: object would slide away along its drift and the squeeze stops with STALLED
 DRIFT_SHARE = 1e-2
-#: a free node this many gap tolerances inside a fingertip after an event joins there (event A)
-SUNK_TOLS = 10
+#: a free node this many gap tolerances inside a fingertip after an event joins there (event A):
+#: (float64, float32). float32's gap_tol (1e-5 L) is 1e4 times float64's: from 10 of them a
+#: node that a release sank by a few µm stayed free inside its tip, and its finger could be left
+#: empty (docs/numerics.md §3)
+SUNK_TOLS = (10, 2)
 #: an event that undid itself within ``event_tol`` of the row the last event made, or a contact set
 #: that did not settle at one depth (a node that peels off in cycles shorter than the
 #: tolerance), is resolved again with the tolerance divided by REFINE[0], at most REFINE[1]
@@ -601,11 +604,13 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # (the foam square's node 89 chattered in and out at 12.0 mm until STALLED), so the sign
     # of the force's rate decides; in float64 its value just past d*, at the event location's
     # error event_tol (at most η). A node that joined where a release sank it (a later pass)
-    # carries a force of its own at d*, and is judged there: it pushes at d* and may pull again
-    # a little deeper, a cycle that shrinks as it repeats; judged past d* it pulled at once,
-    # and the cycle stalled at one depth (docs/numerics.md §2, 21 and 22)
+    # carries a force of its own at d*, and is judged there, in either precision: it pushes at
+    # d* and may pull again a little deeper, a cycle that shrinks as it repeats; judged past d*
+    # (or in float32 by a rate of round-off sign) it pulled at once, and the cycle stalled at
+    # one depth (docs/numerics.md §2, 21 and 22; §3)
     probe = jnp.where(st.added > 0, 0.0, jnp.clip(model.ev_tol, 1e3 * jnp.finfo(fn.dtype).eps, eta))
-    pull = test & ((dsol.fn <= 0) if fn.dtype == jnp.float32 else (sol.fn + probe * dsol.fn <= 0))
+    by_force = sol.fn + probe * dsol.fn <= 0
+    pull = test & (jnp.where(st.added > 0, by_force, dsol.fn <= 0) if fn.dtype == jnp.float32 else by_force)
     mode = jnp.where(pull, FREE, ns.mode)
     on = (ns.mode > FREE) & ~test
     theta, stuck, out, flip = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on), jnp.zeros_like(on)
@@ -620,7 +625,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # fingers hold a contact (else the squeeze ends, LOST_CONTACT) and for at most
     # SETTLE_ITERS passes; one still inside after that is ``unsettled``: STALLED. (Point
     # contacts let the other nodes sink by design.)
-    sunk = (ns.mode == FREE) & (sol.gap < -SUNK_TOLS * model.gap_tol) & going \
+    sunk_tols = SUNK_TOLS[1] if fn.dtype == jnp.float32 else SUNK_TOLS[0]
+    sunk = (ns.mode == FREE) & (sol.gap < -sunk_tols * model.gap_tol) & going \
         if model.cfg.contact == "segment" else jnp.zeros_like(on)
     budget = SETTLE_ITERS * (1 + st.stats.refined)                # (check: passes again after a refinement)
     join = sunk & (st.checks < budget)

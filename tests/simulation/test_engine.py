@@ -420,7 +420,7 @@ def test_check_resolves_an_unsettled_set_again_with_a_finer_tolerance(model, tou
     st = _step(model, touched)
     sol, dsol = _solved(model, st)
     free = int(np.flatnonzero(np.asarray(st.nodes.mode) == FREE)[0])
-    sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS * model.gap_tol))
+    sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS[0] * model.gap_tol))
     at = dataclasses.replace(st, phase=jnp.asarray(engine.CHECK, jnp.int32), d_star=st.d, before=st.nodes.mode,
                              added=jnp.full_like(st.added, -1), checks=jnp.asarray(engine.SETTLE_ITERS, jnp.int32))
     chk = jax.jit(engine.check)
@@ -444,7 +444,7 @@ def test_a_check_pass_past_the_settle_limit_leaves_the_set_unsettled(model, touc
     sol, dsol = _solved(model, st)
     mode = np.asarray(st.nodes.mode)
     free, held = int(np.flatnonzero(mode == FREE)[0]), int(np.flatnonzero(mode > FREE)[0])
-    sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS * model.gap_tol))
+    sunk = sol._replace(gap=sol.gap.at[free].set(-2 * engine.SUNK_TOLS[0] * model.gap_tol))
     pulls = sol._replace(fn=sol.fn.at[held].set(-float(engine.largest(sol.F))))
     hyp = jax.jit(engine._hypothesis)
     for checks in (0, engine.SETTLE_ITERS - 1, engine.SETTLE_ITERS):
