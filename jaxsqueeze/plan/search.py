@@ -180,6 +180,26 @@ def _capacities(scene: Scene):
     return scene.settings.capacity, scene.settings.sliding_capacity
 
 
+def _again(scene: Scene, run: Scene, status: int, depth: float) -> Scene | None:
+    """The scene to squeeze a candidate of ``scene`` again with, after squeezing it with ``run``
+    (first :func:`quick`) ended with ``status`` at the depth ``depth`` [m], or None: on
+    ``OVERFLOW`` the scene's own capacities; on ``MAX_STEPS`` or ``EVENT_OVERFLOW`` of an
+    automatic bound (``Settings.max_steps`` / ``max_events`` at None) both bounds longer, by
+    the rule of an eager squeeze (x4, up to x16, within the memory limit:
+    ``simulation.api._longer``)."""
+    from ..simulation import api
+    if status == Status.OVERFLOW and _capacities(run) != _capacities(scene):
+        s = scene.settings
+        return run.replace(settings=dataclasses.replace(run.settings, capacity=s.capacity,
+                                                        sliding_capacity=s.sliding_capacity))
+    if status in (Status.MAX_STEPS, Status.EVENT_OVERFLOW):
+        cfg = api._longer(scene, api.config_of(run), status, depth)
+        if cfg is not None:
+            return run.replace(settings=dataclasses.replace(run.settings, max_steps=cfg.max_steps,
+                                                            max_events=cfg.max_events))
+    return None
+
+
 def _progress(done, total, t0, label):
     if sys.stderr.isatty():
         rate = done / max(time.perf_counter() - t0, 1e-9)
@@ -208,7 +228,8 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     is one compiled program's batch there. A failed or infeasible candidate
     returns its status with quality 0 and costs only its first solve in a loop. Candidates are
     squeezed with the :func:`quick` capacities first; those that overflow them once more with
-    the scene's own.
+    the scene's own, and those that run out of the automatic loop or event bound once more with
+    longer bounds, one at a time (:func:`_again`).
     """
     X = candidates(X)
     if chunk is not None:
@@ -219,11 +240,25 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     if batch != "processes":       # (the workers of "processes" loop through this function)
         fast = quick(scene)
         summ = _evaluate(fast, X, quality, op, batch, chunk, progress, processes, cache)
-        redo = np.flatnonzero(summ.status == Status.OVERFLOW)
-        if len(redo) and _capacities(fast) != _capacities(scene):
-            again = _evaluate(scene, X[redo], quality, op, batch, chunk, False, processes, cache)
-            for a, b in zip(summ, again):
-                a[redo] = b
+        todo = [(fast, np.arange(len(X)))]
+        while todo:
+            run, idx = todo.pop()
+            groups = {}
+            for k in idx:
+                nxt = _again(scene, run, int(summ.status[k]), float(summ.depth[k]))
+                if nxt is not None:
+                    s = nxt.settings
+                    key = (s.capacity, s.sliding_capacity, s.max_steps, s.max_events)
+                    groups.setdefault(key, (nxt, []))[1].append(k)
+            for nxt, ks in groups.values():
+                ks = np.asarray(ks)
+                # longer bounds one candidate at a time (a vmap of thousands of rows each would
+                # need gigabytes)
+                longer = nxt.settings.max_steps != run.settings.max_steps
+                again = _evaluate(nxt, X[ks], quality, op, "loop" if longer else batch, chunk, False, processes, cache)
+                for a, b in zip(summ, again):
+                    a[ks] = b
+                todo.append((nxt, ks))
     else:
         summ = _evaluate(scene, X, quality, op, batch, chunk, progress, processes, cache)
     _check_quality(summ, X)
@@ -519,10 +554,11 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     scale_ = jnp.asarray(scale)
     fast = quick(scene)
 
-    def value_and_grad(u):       # the quick capacities first, the scene's own where they overflow
-        s, g = _value_and_grad(fast, qfn, op, u, scale_)
-        if int(s.status) == Status.OVERFLOW and _capacities(fast) != _capacities(scene):
-            s, g = _value_and_grad(scene, qfn, op, u, scale_)
+    def value_and_grad(u):       # the quick capacities first, then as evaluate does (_again)
+        run = fast
+        s, g = _value_and_grad(run, qfn, op, u, scale_)
+        while (run := _again(scene, run, int(s.status), float(s.depth))) is not None:
+            s, g = _value_and_grad(run, qfn, op, u, scale_)
         _check_quality(jax.tree.map(lambda a: np.asarray(a)[None], s), np.asarray(u)[None] / scale)
         return s, g
 

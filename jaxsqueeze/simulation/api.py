@@ -188,7 +188,7 @@ def _grown(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -> Con
     if status == Status.OVERFLOW:
         return _more_slots(scene, op, cfg, res)
     if status in (Status.MAX_STEPS, Status.EVENT_OVERFLOW):
-        return _longer(scene, cfg, res)
+        return _longer(scene, cfg, status, float(res.final_depth))
     return None
 
 
@@ -218,20 +218,20 @@ def _more_slots(scene: Scene, op: Compliance, cfg: Config, res: SqueezeResult) -
     return dataclasses.replace(cfg, capacity=capacity, sliding=slide)
 
 
-def _longer(scene: Scene, cfg: Config, res: SqueezeResult) -> Config | None:
+def _longer(scene: Scene, cfg: Config, status: int, reached: float) -> Config | None:
     """``cfg`` with its automatic loop and event-log bounds (``Settings.max_steps`` /
-    ``max_events`` at None) ``LOG_GROWTH`` times longer (loop bound: enough for the target
-    depth at the rows per metre that ``res`` took) after ``res`` stopped MAX_STEPS or
-    EVENT_OVERFLOW; None when the bound that ran out is set by the settings, or would pass
-    ``LOG_GROWTH ** 2`` times its start (a step far too small for the depth) or the memory
-    limit."""
+    ``max_events`` of ``scene`` at None) ``LOG_GROWTH`` times longer (loop bound: enough for
+    the target depth at the rows per metre of a squeeze that reached the depth ``reached``
+    [m]) after a squeeze with ``cfg`` stopped with ``status`` MAX_STEPS or EVENT_OVERFLOW;
+    None when the bound that ran out is set by the settings, or would pass ``LOG_GROWTH ** 2``
+    times its start (a step far too small for the depth) or the memory limit. (Also the
+    planner's rule: ``plan.search``.)"""
     s = scene.settings
-    steps_out = int(res.status) == Status.MAX_STEPS
+    steps_out = int(status) == Status.MAX_STEPS
     if (s.max_steps if steps_out else s.max_events) is not None:
         return None
     grow = LOG_GROWTH
     if steps_out:
-        reached = float(res.final_depth)
         need = (cfg.max_steps + 1) * float(scene.depth) / reached if reached > 0 else np.inf
         while cfg.max_steps * grow < need and grow <= LOG_GROWTH ** 2:
             grow *= LOG_GROWTH

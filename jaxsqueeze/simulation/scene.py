@@ -195,7 +195,8 @@ class Settings:
     max_steps: bound on loop iterations (steps plus event resolutions), static; more give
         ``Status.MAX_STEPS``. ``None`` (default): 400, and an eager squeeze that runs out of
         them (or of ``max_events``) squeezes again with 4 times as many, up to 16 times
-        (6,400; the same result, a program per size); a traced one keeps 400.
+        (6,400; the same result, a program per size); a traced one keeps 400 (the planner
+        squeezes a candidate that runs out again, as an eager squeeze would).
     max_events: capacity of the event log, static; more events give
         ``Status.EVENT_OVERFLOW``. ``None`` (default): 256, grown like ``max_steps`` (up
         to 4,096) eagerly. Some full-stick squeezes, where a few nodes touch and leave again

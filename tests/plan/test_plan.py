@@ -726,6 +726,50 @@ def test_maps_squeeze_with_quick_capacities_and_redo_what_overflows(ellipse, mon
     np.testing.assert_array_equal(redone.quality, own.quality)
 
 
+def test_maps_and_searches_redo_what_runs_out_of_steps_with_longer_bounds(ellipse, monkeypatch):
+    """A candidate that needs more than the automatic 400 loop iterations (a step of depth /
+    450) is squeezed again with 1,600 (and 1,024 events: x4, as an eager squeeze would), one
+    at a time: the statuses and qualities of the scene with those bounds set. A search step
+    climbs the same ladder (``_again``): quick capacities, then longer bounds, then the
+    scene's own capacities where the longer squeeze overflows."""
+    from jaxsqueeze.plan import search
+    P = float(ellipse.curve().perimeter)
+    X = plan.candidate_pairs(ellipse, spacing=P / 8)[[0, 1, 5]]
+    op = ellipse.operator()
+    fine = ellipse.replace(settings=jsq.Settings(step=ellipse.depth / 450))
+    calls, evaluate = [], search._evaluate
+
+    def spy(scene, X, *args):
+        out = evaluate(scene, X, *args)
+        calls.append((scene.settings.max_steps, scene.settings.max_events, args[2], out.status.tolist()))
+        return out
+
+    monkeypatch.setattr(search, "_evaluate", spy)
+    redone = plan.evaluate(fine, X, op=op, batch="loop", progress=False)
+    S, M = jsq.Status.SUCCESS, jsq.Status.MAX_STEPS
+    assert calls == [(None, None, "loop", [M, M, jsq.Status.SLIP_FAILURE]), (1600, 1024, "loop", [S, S])]
+    longer = search.quick(fine).settings
+    own = evaluate(fine.replace(settings=dataclasses.replace(longer, max_steps=1600, max_events=1024)), X,
+                   "squeeze_work", op, "loop", 64, False, None, True)
+    np.testing.assert_array_equal(redone.status, own.status)
+    np.testing.assert_array_equal(redone.quality, own.quality)
+    assert np.all(redone.quality[:2] > 0)
+
+    # the search's ladder, on a stand-in for its compiled step (which reports what it ran with)
+    ran = []
+
+    def step(scene, qfn, op, u, scale):
+        s = scene.settings
+        ran.append((s.capacity, s.max_steps))
+        status = M if s.max_steps is None else (jsq.Status.OVERFLOW if s.capacity == 32 else S)
+        summary = search.Summary(jnp.array(status), jnp.array(1.0), jnp.array(1.0), jnp.array(0.003), jnp.array(0.1))
+        return summary, jnp.zeros(3)
+
+    monkeypatch.setattr(search, "_value_and_grad", step)
+    best = jsq.optimize_placement(fine, "squeeze_work", init=X[:1], steps=0, progress=False)
+    assert ran == [(32, None), (32, 1600), (None, 1600)] and best.history[0][0].status == S
+
+
 PLANNING_OBJECTS = {     # coarse meshes: a fine exhaustive map at node spacing stays affordable in a test
     "square": lambda: jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01),
     "ellipse": lambda: jsq.shapes.ellipse(0.06, 0.04, max_edge=0.01),

@@ -441,33 +441,32 @@ def test_automatic_loop_bounds_grow_fourfold_up_to_sixteen_times(monkeypatch):
     the pace of the rows so far (none when not even 6,400 are: a step far too small); a
     bound the settings set neither grows nor lets the squeeze rerun when it is the one that
     ran out; nothing beyond the memory limit."""
-    import types
     from jaxsqueeze.simulation import scene as scene_mod, validate
 
     def stop(status, reached=0.006):            # a squeeze to 12 mm stopped at 6 mm
-        return types.SimpleNamespace(status=status, final_depth=reached)
+        return status, reached
 
     S, E = stop(jsq.Status.MAX_STEPS), stop(jsq.Status.EVENT_OVERFLOW)
     sc = base_scene()
     cfg = grasp_mod.config_of(sc, eager=True)
     assert (cfg.max_steps, cfg.max_events) == (scene_mod.STEPS, scene_mod.EVENTS) == (400, 256)
     assert grasp_mod.config_of(sc).max_events == 256                   # traced: the same start, no rerun
-    longer = grasp_mod._longer(sc, cfg, S)
-    longest = grasp_mod._longer(sc, longer, E)
+    longer = grasp_mod._longer(sc, cfg, *S)
+    longest = grasp_mod._longer(sc, longer, *E)
     assert [(c.max_steps, c.max_events) for c in (longer, longest)] == [(1600, 1024), (6400, 4096)]
-    assert longest.capacity == cfg.capacity and grasp_mod._longer(sc, longest, S) is None
+    assert longest.capacity == cfg.capacity and grasp_mod._longer(sc, longest, *S) is None
     # 2,400 / 6,900 / endless rows to 12 mm
     for reached, bounds in ((0.002, (6400, 4096)), (0.0007, None), (0.0, None)):
-        grown = grasp_mod._longer(sc, cfg, stop(jsq.Status.MAX_STEPS, reached=reached))
+        grown = grasp_mod._longer(sc, cfg, *stop(jsq.Status.MAX_STEPS, reached=reached))
         assert bounds == (grown and (grown.max_steps, grown.max_events))
     fixed = sc.replace(settings=jsq.Settings(max_steps=500))
     c = grasp_mod.config_of(fixed, eager=True)
-    assert grasp_mod._longer(fixed, c, S) is None
-    events_out = grasp_mod._longer(fixed, c, E)
+    assert grasp_mod._longer(fixed, c, *S) is None
+    events_out = grasp_mod._longer(fixed, c, *E)
     assert (events_out.max_steps, events_out.max_events) == (500, 1024)
     monkeypatch.setattr(validate, "MEMORY_LIMIT", 2 * validate.history_bytes(56, cfg.capacity, 400, 256))
     assert len(sc.boundary_nodes()) == 56 and validate.scene_cost_problems(sc) == []
-    assert grasp_mod._longer(sc, cfg, E) is None
+    assert grasp_mod._longer(sc, cfg, *E) is None
 
 
 def test_too_few_slots_gives_overflow_with_advice():
