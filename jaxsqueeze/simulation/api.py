@@ -10,7 +10,7 @@ import numpy as np
 from jax import lax
 from jax.custom_batching import custom_vmap
 
-from .engine import Config, Grasp, simulate
+from .engine import SUNK_TOLS, Config, Grasp, simulate
 from . import laws
 from . import validate
 from ..geometry import boundary
@@ -361,6 +361,9 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
             deep = validate.deep_warning(None, depth, between)
             if deep:
                 warnings.warn(deep, stacklevel=2)
+        pinched = validate.pinched_warning(res, SUNK_TOLS[op.G.dtype == np.float32] * float(grasp.gap_tol))
+        if pinched:
+            warnings.warn(pinched, stacklevel=2)
     if op.field is not None:
         u = field_displacement(op, F_hat, g_hat)
         u = as_array(np.asarray(u) * np.asarray(op.length), u.dtype) if is_concrete(u) else u * op.length

@@ -689,6 +689,36 @@ def inverted_warning(points, triangles, u, depth: float) -> str | None:
             "(result.depth gives the rows before), or grip where the object is wider")
 
 
+def pinched_warning(res, tol: float) -> str | None:
+    """The warning for a contact node of one grasping fingertip that a squeeze ``res`` pressed
+    more than ``tol`` [m] into the other one, or None. A node holds one contact: where both
+    tips close on one node (an object's corner between them) it stays on its own tip, and the
+    other tip passes through it, which the squeeze itself does not see (docs/numerics.md §2,
+    27). Contact nodes lie on their tip: x = C_f + r (cos, sin)(θ + α_f)."""
+    k = int(res.count)                                  # (rows past it are padding in an untrimmed result)
+    modes, fg = np.asarray(res.modes)[:k], np.asarray(res.finger)[:k].astype(int)
+    on = (modes > 0) & (fg >= 0) & (fg < 2)
+    if not on.any():
+        return None
+    f = np.where(on, fg, 0)
+    rows = np.arange(modes.shape[0])[:, None]
+    C, r = np.asarray(res.centres, float)[:k], float(res.radius)
+    ang = np.asarray(res.theta, float)[:k] + np.asarray(res.alpha, float)[:k][rows, f]
+    x = C[rows, f] + r * np.stack([np.cos(ang), np.sin(ang)], -1)
+    inside = np.where(on, r - np.linalg.norm(x - C[rows, 1 - f], axis=-1), -np.inf)     # (k, m) [m]
+    bad = inside > tol
+    if not bad.any():
+        return None
+    i = int(np.argmax(bad.any(axis=1)))
+    pos = int(np.argmax(np.where(bad[i], inside[i], -np.inf)))
+    node, finger = int(np.asarray(res.nodes)[pos]), int(f[i, pos])
+    return (f"from depth = {float(np.asarray(res.depth)[i]):g} m node {node}, a contact of finger {finger}, lies "
+            f"inside fingertip {1 - finger} (by {float(np.max(inside)):.3g} m at most): both tips close on it (an "
+            "object's corner between them), and a node holds one contact, so the rows from there on let the other "
+            "tip pass through it (docs/numerics.md §2, 27); grip farther from the corner, with smaller fingertips, "
+            "or squeeze less deep (result.depth gives the rows before)")
+
+
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
                   thickness=None, between=None) -> tuple[list[str], list[str]]:
     """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.

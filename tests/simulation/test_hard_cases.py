@@ -420,6 +420,37 @@ def test_a_release_that_lands_a_node_inside_a_fingertip_rejoins_until_it_comes_f
     assert res.modes[at][k] == 0 and gap(at) > -SUNK_TOLS[0] * 1e-9 * 0.1
 
 
+def test_a_corner_pinched_between_both_tips_warns():
+    """docs/numerics.md §2, 27 (a random full-stick scene against the oracle): a rectangle's
+    corner node between two 240 mm tips touches both at 1.0776 mm; a node holds one contact,
+    and the other tip passes through it, 1.5 mm deep at 3.2 mm. The squeeze warns from the
+    first row where it is inside, and not before that depth."""
+    import warnings
+    mesh = jsq.shapes.rectangle(0.08, 0.05, max_edge=0.005)
+    corner = mesh.points[0]
+    ring = list(mesh.boundary)
+    at = ring.index(0)
+    assert np.argmin(mesh.points.sum(axis=1)) == 0 and {ring[at - 1], ring[(at + 1) % len(ring)]} == {1, 51}
+    sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=-0.9, thickness=0.0254), fingers=jsq.Fingers(radius=0.24),
+                   grip=(51, 1), friction=0.5, depth=0.0032, friction_model="stick")
+    with pytest.warns(UserWarning, match=r"node 0, a contact of finger 0, lies inside fingertip 1") as said:
+        res = jsq.squeeze(sc)
+    assert res.outcome == jsq.Status.SUCCESS
+    k = list(np.asarray(res.nodes)).index(0)
+    x = corner + np.asarray(res.boundary_displacement)[:, k]                # (rows, 2) node 0, deformed
+    inside = 0.24 - np.linalg.norm(x - np.asarray(res.centres)[:, 1], axis=1)
+    on_0 = (np.asarray(res.modes)[:, k] > 0) & (np.asarray(res.finger)[:, k] == 0)
+    first = int(np.argmax(on_0 & (inside > 10 * 1e-9 * 0.08)))
+    assert inside[-1] == pytest.approx(1.52e-3, rel=0.01) and on_0[-1]
+    [message] = [str(w.message) for w in said if "fingertip 1" in str(w.message)]
+    assert f"from depth = {res.depth[first]:g} m" in message and "corner" in message
+    assert 1.0776e-3 < res.depth[first] < 1.2e-3
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        before = jsq.squeeze(sc.replace(depth=0.00107))                          # node 0 still free
+    assert before.outcome == jsq.Status.SUCCESS
+
+
 def test_an_eager_squeeze_that_runs_out_of_steps_squeezes_again_with_more():
     """Settings.max_steps = None: 400 loop iterations, and an eager squeeze that needs more
     squeezes again with 1,600 (the same squeeze: its first 401 rows are those of max_steps =
