@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +25,7 @@ except ModuleNotFoundError:  # pragma: no cover
 
 ROOT = physics.ROOT
 FUZZ = os.path.join(ROOT, "tests", "data", "fuzz")
-BASE = open(os.path.join(FUZZ, "base.toml"), encoding="utf-8").read()
+BASE = Path(FUZZ, "base.toml").read_text(encoding="utf-8")
 with open(os.path.join(FUZZ, "cases.toml"), "rb") as fh:
     CASES = tomllib.load(fh)
 
@@ -157,7 +158,8 @@ def test_internal_error_is_exit_3_with_traceback_file(tmp_path, capsys, monkeypa
     rc, err, out, _ = _run(tmp_path, BASE, capsys)
     assert rc == 3 and "internal error" in err and "simulated bug" in err and "Traceback" not in err
     tb = err.split("the full traceback is in ")[1].split(" ")[0]
-    assert "RuntimeError: simulated bug" in open(tb).read() and "scene.toml" in open(tb).read()
+    text = Path(tb).read_text()
+    assert "RuntimeError: simulated bug" in text and "scene.toml" in text
     os.remove(tb)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -411,7 +412,7 @@ def test_cli_says_the_library_warnings_as_warning_lines(tmp_path, capsys):
     and keeps it in summary.json. A wall so thin that round-off can reach 0.2 of the compliance:
     said once, under object.width, though the run builds the operator again in float64."""
     path = tmp_path / "deep.toml"
-    path.write_text(open(_path("heart")).read().replace("relative_depth = 0.10", "relative_depth = 0.6").replace(
+    path.write_text(Path(_path("heart")).read_text().replace("relative_depth = 0.10", "relative_depth = 0.6").replace(
         "width = 0.0005 ", "width = 1e-7 "))
     out = tmp_path / "out"
     cli.main(["run", str(path), "--out", str(out), "--no-plots"])
