@@ -727,42 +727,64 @@ def test_maps_squeeze_with_quick_capacities_and_redo_what_overflows(ellipse, mon
 
 
 def test_maps_and_searches_redo_what_runs_out_of_steps_with_longer_bounds(ellipse, monkeypatch):
-    """A candidate that needs more than the automatic 400 loop iterations (a step of depth /
-    450) is squeezed again with 1,600 (and 1,024 events: x4, as an eager squeeze would), one
-    at a time: the statuses and qualities of the scene with those bounds set. A search step
-    climbs the same ladder (``_again``): quick capacities, then longer bounds, then the
-    scene's own capacities where the longer squeeze overflows."""
+    """A candidate that runs out of the automatic loop bound (400) or event log (256) is
+    squeezed again with both 4 times longer, then 16 times, by the eager rule (``_again``,
+    ``api._longer``: sized by the pace so far; a bound set by hand stays), one at a time
+    ("loop") in any batch mode; one that overflows the quick capacities again with the
+    scene's own. Maps and search steps climb that ladder (here on stand-ins for their
+    compiled squeezes, which report what they ran with)."""
     from jaxsqueeze.plan import search
-    P = float(ellipse.curve().perimeter)
-    X = plan.candidate_pairs(ellipse, spacing=P / 8)[[0, 1, 5]]
-    op = ellipse.operator()
-    fine = ellipse.replace(settings=jsq.Settings(step=ellipse.depth / 450))
-    calls, evaluate = [], search._evaluate
+    S, M, E, O = jsq.Status.SUCCESS, jsq.Status.MAX_STEPS, jsq.Status.EVENT_OVERFLOW, jsq.Status.OVERFLOW
+    fine = ellipse.replace(settings=jsq.Settings(step=ellipse.depth / 450))      # 6 mm in 450 steps
+    fast = search.quick(fine)
+    bounds = lambda sc: (sc.settings.capacity, sc.settings.max_steps, sc.settings.max_events)  # noqa: E731
+    longer = search._again(fine, fast, M, 0.0053)                  # stopped at 5.3 mm: 460 rows needed
+    assert bounds(longer) == (32, 1600, 1024)
+    assert bounds(search._again(fine, fast, M, 0.001)) == (32, 6400, 4096)     # 2,400 rows needed
+    assert search._again(fine, fast, M, 0.0003) is None                        # 8,000: a step far too small
+    longest = search._again(fine, longer, E, 0.003)
+    assert bounds(longest) == (32, 6400, 4096) and search._again(fine, longest, E, 0.003) is None
+    assert bounds(search._again(fine, longer, O, 0.003)) == (None, 1600, 1024)  # the scene's own capacities
+    assert search._again(fine, fast, jsq.Status.SLIP_FAILURE, 0.003) is None
+    by_hand = fine.replace(settings=jsq.Settings(step=ellipse.depth / 450, max_steps=400))
+    assert search._again(by_hand, search.quick(by_hand), M, 0.0053) is None
 
-    def spy(scene, X, *args):
-        out = evaluate(scene, X, *args)
-        calls.append((scene.settings.max_steps, scene.settings.max_events, args[2], out.status.tolist()))
-        return out
+    # evaluate: candidate k (s_0 = k mm) ends as the stand-in says for what it runs with
+    def outcome(k, capacity, steps, events):
+        if k == 1:
+            return M if steps is None else S             # needs 1,600 steps
+        if k == 2:
+            return O if capacity == 32 else (M if steps is None else S)
+        if k == 3:
+            return E                                     # never enough events
+        return S
 
-    monkeypatch.setattr(search, "_evaluate", spy)
-    redone = plan.evaluate(fine, X, op=op, batch="loop", progress=False)
-    S, M = jsq.Status.SUCCESS, jsq.Status.MAX_STEPS
-    assert calls == [(None, None, "loop", [M, M, jsq.Status.SLIP_FAILURE]), (1600, 1024, "loop", [S, S])]
-    longer = search.quick(fine).settings
-    own = evaluate(fine.replace(settings=dataclasses.replace(longer, max_steps=1600, max_events=1024)), X,
-                   "squeeze_work", op, "loop", 64, False, None, True)
-    np.testing.assert_array_equal(redone.status, own.status)
-    np.testing.assert_array_equal(redone.quality, own.quality)
-    assert np.all(redone.quality[:2] > 0)
+    calls = []
 
-    # the search's ladder, on a stand-in for its compiled step (which reports what it ran with)
+    def fake(scene, X, quality, op, batch, chunk, progress, processes, cache):
+        ks = np.rint(X[:, 0] * 1e3).astype(int)
+        calls.append((bounds(scene), batch, ks.tolist()))
+        st = np.array([outcome(k, *bounds(scene)) for k in ks])
+        one = np.ones(len(ks))
+        return search.Summary(st, np.where(st == S, (scene.settings.max_steps or 400) * one, 0.0), one, 0.003 * one, one)
+
+    monkeypatch.setattr(search, "_evaluate", fake)
+    X = np.array([[k * 1e-3, 0.1, 0.0] for k in range(4)])
+    summ = plan.evaluate(fine, X, op=ellipse.operator(), batch="vmap", progress=False)
+    assert summ.status.tolist() == [S, S, S, E] and summ.quality.tolist() == [400, 1600, 1600, 0]
+    assert calls == [((32, None, None), "vmap", [0, 1, 2, 3]),
+                     ((32, 1600, 1024), "loop", [1, 3]),          # longer: one at a time
+                     ((None, None, None), "vmap", [2]),           # the scene's own capacities
+                     ((None, 1600, 1024), "loop", [2]),
+                     ((32, 6400, 4096), "loop", [3])]
+
+    # a search step: quick capacities, longer bounds, then the scene's own where those overflow
     ran = []
 
     def step(scene, qfn, op, u, scale):
-        s = scene.settings
-        ran.append((s.capacity, s.max_steps))
-        status = M if s.max_steps is None else (jsq.Status.OVERFLOW if s.capacity == 32 else S)
-        summary = search.Summary(jnp.array(status), jnp.array(1.0), jnp.array(1.0), jnp.array(0.003), jnp.array(0.1))
+        ran.append(bounds(scene)[:2])
+        st = {(32, None): M, (32, 1600): O}.get(ran[-1], S)
+        summary = search.Summary(jnp.array(st), jnp.array(1.0), jnp.array(1.0), jnp.array(0.003), jnp.array(0.1))
         return summary, jnp.zeros(3)
 
     monkeypatch.setattr(search, "_value_and_grad", step)
