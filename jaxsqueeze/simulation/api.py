@@ -361,9 +361,10 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
             deep = validate.deep_warning(None, depth, between)
             if deep:
                 warnings.warn(deep, stacklevel=2)
-        pinched = validate.pinched_warning(res, SUNK_TOLS[op.G.dtype == np.float32] * float(grasp.gap_tol))
-        if pinched:
-            warnings.warn(pinched, stacklevel=2)
+        inside = validate.inside_tip_warning(res, np.asarray(scene.mesh.points)[np.asarray(res.nodes)],
+                                             SUNK_TOLS[op.G.dtype == np.float32] * float(grasp.gap_tol), scene.contact)
+        if inside:
+            warnings.warn(inside, stacklevel=2)
     if op.field is not None:
         u = field_displacement(op, F_hat, g_hat)
         u = as_array(np.asarray(u) * np.asarray(op.length), u.dtype) if is_concrete(u) else u * op.length

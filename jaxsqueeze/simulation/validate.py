@@ -689,34 +689,46 @@ def inverted_warning(points, triangles, u, depth: float) -> str | None:
             "(result.depth gives the rows before), or grip where the object is wider")
 
 
-def pinched_warning(res, tol: float) -> str | None:
-    """The warning for a contact node of one grasping fingertip that a squeeze ``res`` pressed
-    more than ``tol`` [m] into the other one, or None. A node holds one contact: where both
-    tips close on one node (an object's corner between them) it stays on its own tip, and the
-    other tip passes through it, which the squeeze itself does not see (docs/numerics.md §2,
-    27). Contact nodes lie on their tip: x = C_f + r (cos, sin)(θ + α_f)."""
+def inside_tip_warning(res, points, tol: float, contact: str = "segment") -> str | None:
+    """The warning for a boundary node that a squeeze ``res`` left more than ``tol`` [m] inside
+    a grasping fingertip it is not a contact of, or None; ``points`` (m, 2) are the boundary
+    nodes' positions [m] (``res.nodes`` order, the frame of ``res.centres``).
+
+    * A contact node inside the other tip: where both tips close on one node (an object's
+      corner between them) it stays on its own tip, since a node holds one contact, and the
+      other tip passes through it (docs/numerics.md §2, 27).
+    * A free node inside a tip, with ``contact="point"``: a point contact is one node per
+      tip and has no event A, so an object that meets a tip along a segment (a solid under a
+      large tip) lets the tip pass through its other nodes.
+
+    Rows where a finger holds no contact (the object let go) are not checked. With segment
+    contacts event A keeps free nodes out (to 10 ``gap_tol``: the
+    ``engine.SUNK_TOLS`` that the caller's ``tol`` is)."""
     k = int(res.count)                                  # (rows past it are padding in an untrimmed result)
     modes, fg = np.asarray(res.modes)[:k], np.asarray(res.finger)[:k].astype(int)
-    on = (modes > 0) & (fg >= 0) & (fg < 2)
-    if not on.any():
-        return None
-    f = np.where(on, fg, 0)
-    rows = np.arange(modes.shape[0])[:, None]
-    C, r = np.asarray(res.centres, float)[:k], float(res.radius)
-    ang = np.asarray(res.theta, float)[:k] + np.asarray(res.alpha, float)[:k][rows, f]
-    x = C[rows, f] + r * np.stack([np.cos(ang), np.sin(ang)], -1)
-    inside = np.where(on, r - np.linalg.norm(x - C[rows, 1 - f], axis=-1), -np.inf)     # (k, m) [m]
+    x = np.asarray(points, float)[None] + np.asarray(res.boundary_displacement, float)[:k]     # (k, m, 2)
+    C, r = np.asarray(res.centres, float)[:k, None, :2], float(res.radius)
+    inside = r - np.linalg.norm(x[:, :, None] - C, axis=-1)                                   # (k, m, 2) [m]
+    own = (modes > 0)[..., None] & (fg[..., None] == np.arange(2))
+    held = own.any(axis=1).all(axis=1)[:, None, None]   # (a LOST_CONTACT's last row: the object let go)
+    inside = np.where(own | ~held | np.isnan(inside), -np.inf, inside)
     bad = inside > tol
     if not bad.any():
         return None
-    i = int(np.argmax(bad.any(axis=1)))
-    pos = int(np.argmax(np.where(bad[i], inside[i], -np.inf)))
-    node, finger = int(np.asarray(res.nodes)[pos]), int(f[i, pos])
-    return (f"from depth = {float(np.asarray(res.depth)[i]):g} m node {node}, a contact of finger {finger}, lies "
-            f"inside fingertip {1 - finger} (by {float(np.max(inside)):.3g} m at most): both tips close on it (an "
-            "object's corner between them), and a node holds one contact, so the rows from there on let the other "
-            "tip pass through it (docs/numerics.md §2, 27); grip farther from the corner, with smaller fingertips, "
-            "or squeeze less deep (result.depth gives the rows before)")
+    i = int(np.argmax(bad.any(axis=(1, 2))))
+    pos, tip = np.unravel_index(int(np.argmax(np.where(bad[i], inside[i], -np.inf))), bad[i].shape)
+    node, deepest = int(np.asarray(res.nodes)[pos]), float(np.max(inside))
+    where = f"from depth = {float(np.asarray(res.depth)[i]):g} m node {node}"
+    if modes[i, pos] > 0:
+        return (f"{where}, a contact of finger {1 - tip}, lies inside fingertip {tip} (by {deepest:.3g} m at most): "
+                "both tips close on it (an object's corner between them), and a node holds one contact, so the rows "
+                "from there on let the other tip pass through it (docs/numerics.md §2, 27); grip farther from the "
+                "corner, with smaller fingertips, or squeeze less deep (result.depth gives the rows before)")
+    why = ("with contact='point' a fingertip touches one node (no event A), and this object meets it along a "
+           "segment; use contact='segment' or smaller fingertips" if contact == "point" else
+           "event A should have made it a contact: please report the scene")
+    return (f"{where}, free, lies inside fingertip {tip} (by {deepest:.3g} m at most, rows from there on): {why} "
+            "(result.depth gives the rows before)")
 
 
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,

@@ -424,7 +424,8 @@ def test_a_corner_pinched_between_both_tips_warns():
     """docs/numerics.md §2, 27 (a random full-stick scene against the oracle): a rectangle's
     corner node between two 240 mm tips touches both at 1.0776 mm; a node holds one contact,
     and the other tip passes through it, 1.5 mm deep at 3.2 mm. The squeeze warns from the
-    first row where it is inside, and not before that depth."""
+    first row where it is inside, and not before that depth; with point contacts it warns of
+    the free nodes a tip passes through."""
     import warnings
     mesh = jsq.shapes.rectangle(0.08, 0.05, max_edge=0.005)
     corner = mesh.points[0]
@@ -449,6 +450,12 @@ def test_a_corner_pinched_between_both_tips_warns():
         warnings.simplefilter("error")
         before = jsq.squeeze(sc.replace(depth=0.00107))                          # node 0 still free
     assert before.outcome == jsq.Status.SUCCESS
+    # point contacts (one node per tip, no event A) on this solid: tip 0 passes through node 50
+    with pytest.warns(UserWarning, match=r"node 50, free, lies inside fingertip 0 .*contact='segment'"):
+        point = jsq.squeeze(sc.replace(contact="point"))
+    k = list(np.asarray(point.nodes)).index(50)
+    x = mesh.points[50] + np.asarray(point.boundary_displacement)[-1, k]
+    assert point.modes[-1][k] == 0 and 0.24 - np.linalg.norm(x - np.asarray(point.centres)[-1, 0]) > 1e-3
 
 
 def test_an_eager_squeeze_that_runs_out_of_steps_squeezes_again_with_more():
