@@ -720,7 +720,7 @@ def inside_tip_warning(res, points, tol: float, contact: str = "segment") -> str
     node, deepest = int(np.asarray(res.nodes)[pos]), float(np.max(inside))
     where = f"from depth = {float(np.asarray(res.depth)[i]):g} m node {node}"
     if modes[i, pos] > 0:
-        return (f"{where}, a contact of finger {1 - tip}, lies inside fingertip {tip} (by {deepest:.3g} m at most): "
+        return (f"{where}, a contact of finger {int(fg[i, pos])}, lies inside fingertip {tip} (by {deepest:.3g} m at most): "
                 "both tips close on it (an object's corner between them), and a node holds one contact, so the rows "
                 "from there on let the other tip pass through it (docs/numerics.md §2, 27); grip farther from the "
                 "corner, with smaller fingertips, or squeeze less deep (result.depth gives the rows before)")
