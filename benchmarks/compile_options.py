@@ -51,20 +51,28 @@ def worker(args, reps):
         contacts.COMPACT = 10 ** 6
     sc, op0, gr, cfg, _ = scene_inputs(eager="traced" not in args)
     fn = G._run.plain if "plain" in args else G._run
+    times, comp, out = timed_compile(fn, (op0, gr), cfg, reps)
+    res = out[0]
+    k = int(res.count)
+    print(json.dumps(dict(**times, rows=k, force=float(res.total_force[k - 1, 1, 1]),
+                          hlo_lines=len(comp.as_text().splitlines()))))
+
+
+def timed_compile(fn, args, cfg, reps):
+    """Trace and lower ``fn(*args, cfg)``, compile it, and run it ``reps`` times: ({trace_lower_s,
+    compile_s, run_ms (best call)}, the compiled program, its last output)."""
+    import jax
     t0 = time.perf_counter()
-    low = fn.lower(op0, gr, cfg)
+    low = fn.lower(*args, cfg)
     t1 = time.perf_counter()
     comp = low.compile()
     t2 = time.perf_counter()
     best = float("inf")
     for _ in range(reps):
         t = time.perf_counter()
-        out = jax.block_until_ready(comp(op0, gr))
+        out = jax.block_until_ready(comp(*args))
         best = min(best, time.perf_counter() - t)
-    res = out[0]
-    k = int(res.count)
-    print(json.dumps(dict(trace_lower_s=t1 - t0, compile_s=t2 - t1, run_ms=1e3 * best, rows=k,
-                          force=float(res.total_force[k - 1, 1, 1]), hlo_lines=len(comp.as_text().splitlines()))))
+    return dict(trace_lower_s=t1 - t0, compile_s=t2 - t1, run_ms=1e3 * best), comp, out
 
 
 def main():

@@ -23,7 +23,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -37,6 +36,7 @@ def worker(m: int, reps: int) -> dict:
     import numpy as np
 
     import jaxsqueeze as jsq
+    from compile_options import timed_compile
     from jaxsqueeze.simulation import api
     warnings.simplefilter("ignore")          # (nearest-node ties on a coarse square)
     for edge in np.linspace(0.003, 0.02, 1200):
@@ -52,18 +52,9 @@ def worker(m: int, reps: int) -> dict:
     op = scene.operator()
     op0 = dataclasses.replace(op, field=None)
     cfg, grasp = api.eager_config(scene, op), api.grasp_of(scene, op)
-    t0 = time.perf_counter()
-    low = api._run.lower(op0, grasp, cfg)
-    t1 = time.perf_counter()
-    core = low.compile()
-    t2 = time.perf_counter()
-    best = float("inf")
-    for _ in range(reps):
-        t = time.perf_counter()
-        out = jax.block_until_ready(core(op0, grasp))
-        best = min(best, time.perf_counter() - t)
-    return dict(m=m, nodes=mesh.n, trace_lower_s=t1 - t0, compile_s=t2 - t1, run_ms=1e3 * best,
-                rows=int(out[0].count), status=int(out[0].status), load=os.getloadavg()[0])
+    times, _, out = timed_compile(api._run, (op0, grasp), cfg, reps)
+    return dict(m=m, nodes=mesh.n, **times, rows=int(out[0].count), status=int(out[0].status),
+                load=os.getloadavg()[0])
 
 
 def main(argv=None):
