@@ -274,8 +274,23 @@ def _main(args) -> int:
     return _simulate(spec, out, args, progress)
 
 
+def _said(spec, caught, quiet: bool) -> list:
+    """The scene file's warnings and, after them, each distinct library warning ``caught``
+    (``warnings.catch_warnings(record=True)``), printed as ``warning:`` lines unless ``quiet``
+    (the scene file's own were printed when it loaded)."""
+    said = list(spec.warnings)
+    for w in caught:
+        text = str(w.message)
+        if not any(w.endswith(text) for w in said):          # the scene file's own, under its key
+            said.append(text)
+            if not quiet:
+                print(f"warning: {text}", file=sys.stderr)
+    return said
+
+
 def _plan(spec, out, args, progress) -> int:
     import shutil
+    import warnings
 
     from ..post.views import json_ready
     from .planning import plan_settings, run_plan
@@ -284,7 +299,12 @@ def _plan(spec, out, args, progress) -> int:
     progress.start("plan", "mapping and searching grasps")
     tmp = _staging(out)
     try:
-        summary = run_plan(spec.scene, settings, tmp, progress=progress.enabled, plots=not args.no_plots)
+        with warnings.catch_warnings(record=True) as caught:     # the library's warnings, as warning: lines
+            warnings.simplefilter("always")
+            summary = run_plan(spec.scene, settings, tmp, progress=progress.enabled, plots=not args.no_plots)
+        said = _said(spec, caught, args.quiet)
+        if said:
+            summary["warnings"] = said
         summary["files"] = {k: os.path.join(out, os.path.basename(v)) for k, v in summary["files"].items()}
         with open(os.path.join(tmp, "summary.json"), "w", encoding="utf-8") as f:
             json.dump(json_ready(summary), f, indent=2, allow_nan=False)
@@ -334,13 +354,7 @@ def _simulate(spec, out, args, progress) -> int:
         progress.start("squeeze", "compiling + squeezing")
         res = squeeze(scene)
     progress.done()
-    said = list(spec.warnings)
-    for w in caught:
-        text = str(w.message)
-        if not any(w.endswith(text) for w in said):          # the scene file's own, under its key
-            said.append(text)
-            if not args.quiet:
-                print(f"warning: {text}", file=sys.stderr)
+    said = _said(spec, caught, args.quiet)
 
     tmp = _staging(out)
     try:

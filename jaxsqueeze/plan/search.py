@@ -9,10 +9,12 @@ coarse map.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import sys
 import time
+import warnings
 from functools import partial
 from typing import Callable, NamedTuple
 
@@ -21,9 +23,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import compiler
+from ..geometry.mesh import Mesh
 from ..numbers import real_array
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
+from ..simulation import validate
 from ..simulation.status import Status
 from ..tracing import numeric
 from .quality import adversary_work, grip_force, slip_margin, squeeze_work
@@ -111,12 +115,45 @@ def candidates(X, name: str = "X") -> np.ndarray:
     return np.concatenate([x, np.zeros((len(x), 1))], 1) if x.shape[1] == 2 else x
 
 
-def _check(scene: Scene, X, op):
+def _check(scene: Scene, X, op, everywhere: bool = False):
     """The operator without its full-field map (maps keep no fields), after the eager checks
     of a squeeze of ``scene`` placed at the first candidate: inside a map or a search a bad
-    number would only be a status (INVALID_INPUT in every cell, then "no feasible placement")."""
+    number would only be a status (INVALID_INPUT in every cell, then "no feasible placement").
+    Warns (:class:`~jaxsqueeze.simulation.validate.PlacementResolutionWarning`) where the
+    boundary edges under the candidates (``everywhere``: all of the outer loop's, for a search)
+    are too long for the fingertips: a map would show holes between the nodes, and a search
+    would steer around them."""
     from ..simulation.api import check_scene
-    return dataclasses.replace(check_scene(_placed(scene, X[0]), op), field=None)   # (a static part: identity-hashed)
+    op = check_scene(_placed(scene, X[0]), op)
+    if isinstance(scene.mesh, Mesh) and scene.contact == "segment" and scene.friction_model == "coulomb":
+        edges = _edges_under(scene, None if everywhere else X[:, :2])
+        coarse = validate.placement_warning(float(edges.max()), float(scene.fingers.radius), float(scene.friction))
+        if coarse:
+            warnings.warn(coarse, validate.PlacementResolutionWarning, stacklevel=3)
+    return dataclasses.replace(op, field=None)   # (a static part: identity-hashed)
+
+
+@contextlib.contextmanager
+def _said_already():
+    """No :class:`~jaxsqueeze.simulation.validate.PlacementResolutionWarning` inside: the caller
+    has given it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", validate.PlacementResolutionWarning)
+        yield
+
+
+def _edges_under(scene: Scene, s=None) -> np.ndarray:
+    """The length [m] of the outer boundary loop's edge under each arc length ``s`` [m] (any
+    shape, periodic in the perimeter): the edge between the two nodes a fingertip placed there
+    lands between. ``None``: every edge of the loop."""
+    outer = np.asarray(scene.mesh.boundary)[:scene.mesh.loops[0]]
+    x = np.asarray(scene.mesh.points)[outer]
+    edges = np.linalg.norm(np.roll(x, -1, axis=0) - x, axis=1)          # node k to node k + 1
+    if s is None:
+        return edges
+    at = np.asarray(scene.arc_length(outer))
+    s = np.mod(np.asarray(s, float), float(scene.curve().perimeter))
+    return edges[np.clip(np.searchsorted(at, s, side="right") - 1, 0, len(at) - 1)]
 
 
 def _placed(scene: Scene, x) -> Scene:
@@ -209,7 +246,8 @@ def _progress(done, total, t0, label):
 
 def _evaluate_part(scene: Scene, quality, op, X) -> Summary:
     """One worker's share of :func:`evaluate` with ``batch="processes"`` (module level: picklable)."""
-    return evaluate(scene, X, quality, op=op, batch="loop", progress=False)
+    with _said_already():                        # (by the parent)
+        return evaluate(scene, X, quality, op=op, batch="loop", progress=False)
 
 
 def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "auto", chunk: int | None = None,
@@ -513,7 +551,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
 
     check_search(optimizer, steps, starts, budget, init)
     init = None if init is None else candidates(init, "init")
-    op = _check(scene, np.zeros((1, 3)) if init is None else init, op)
+    op = _check(scene, np.zeros((1, 3)) if init is None else init, op, everywhere=True)
     qfn = quality_of(scene, quality)
     P = float(scene.curve().perimeter)
     scale = np.array([2 * math.pi / P, 2 * math.pi / P, 1.0])
@@ -527,12 +565,13 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         ordered = not roles_symmetric(scene, quality)
         n = len(grid(scene, spacing))
         screened = n * (n - 1) // (1 if ordered else 2)
-        X = candidate_pairs(scene, spacing, op=op, ordered=ordered)
-        if budget is not None and int(budget) <= len(X):         # known before any squeeze
-            raise ValueError(f"budget={budget} squeezes is spent before the search starts (the coarse map squeezes "
-                             f"the {len(X)} pairs that pass the cone test, and each start needs at least 1 more): "
-                             "raise the budget, or use a coarser coarse_spacing")
-        summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
+        with _said_already():                    # (for the whole boundary, above)
+            X = candidate_pairs(scene, spacing, op=op, ordered=ordered)
+            if budget is not None and int(budget) <= len(X):         # known before any squeeze
+                raise ValueError(f"budget={budget} squeezes is spent before the search starts (the coarse map "
+                                 f"squeezes the {len(X)} pairs that pass the cone test, and each start needs at "
+                                 "least 1 more): raise the budget, or use a coarser coarse_spacing")
+            summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
         squeezes += len(X)
         ok = np.zeros(0, bool) if summ is None else summ.status == Status.SUCCESS
         order = np.argsort(-np.where(ok, summ.quality, -np.inf)) if len(X) else np.zeros(0, int)

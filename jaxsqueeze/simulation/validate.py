@@ -673,6 +673,30 @@ def deep_warning(size: float | None, depth: float, between: float | None = None)
     return None
 
 
+class PlacementResolutionWarning(UserWarning):
+    """Boundary edges too long for placed fingertips: between the nodes, the first contacts
+    leave their friction cones (:func:`placement_warning`)."""
+
+
+def placement_warning(edge: float, radius: float, mu: float) -> str | None:
+    """The warning for fingertips of ``radius`` [m] placed on boundary edges ``edge`` [m] long,
+    under Coulomb friction ``mu``, or None.
+
+    A placed fingertip first touches the node nearest its pole. Between two nodes h apart it
+    touches one up to h/2 off the pole, where its normal is turned by up to asin(h / 2r) from
+    the object's. Beyond the friction cone's half angle atan(mu), a placement between the nodes
+    comes out ``INFEASIBLE_GRIP`` (its first contacts leave the cones) where a finer boundary
+    would hold (docs/planning.md, "Continuous placement", 4)."""
+    tilt, cone = np.degrees(np.arcsin(min(1.0, edge / (2 * radius)))), np.degrees(np.arctan(mu))
+    if tilt <= cone:
+        return None
+    return (f"boundary edges {edge:.3g} m long under fingertips of radius {radius:.3g} m: a placed fingertip that "
+            f"lands between two nodes first touches one of them up to {tilt:.1f} deg off its normal, beyond the "
+            f"friction cone's {cone:.1f} deg (mu={mu:g}), so such placements come out INFEASIBLE_GRIP where a finer "
+            f"boundary would hold; refine the outer boundary where the fingers go to edges of at most "
+            f"2 r sin(atan mu) = {2 * radius * np.sin(np.arctan(mu)):.3g} m (max_edge, or refine_near)")
+
+
 def inverted_warning(points, triangles, u, depth: float) -> str | None:
     """The warning for triangles that a squeeze to ``depth`` [m] turned inside out, or None:
     ``points`` (n, 2) and ``triangles`` (t, 3) of the mesh (counterclockwise), ``u`` (n, 2)
@@ -774,4 +798,5 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "RADIUS_SHARE", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
            "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
            "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
-           "shape_problems", "unit_problems", "deep_warning", "inverted_warning", "boundary_points", "force_limit"]
+           "shape_problems", "unit_problems", "deep_warning", "PlacementResolutionWarning", "placement_warning",
+           "inverted_warning", "boundary_points", "force_limit"]

@@ -399,9 +399,18 @@ def test_a_fingertip_between_coarse_nodes_touches_one_tilted_and_refining_there_
     5.8 mm off its axis: its normal there makes 39 degrees with the segment between the
     contacts, past the 16.7 degree cone of mu = 0.3: infeasible, and INFEASIBLE_GRIP's advice
     says what to do. Refined to 2 mm near the fingers (refine_near), the same placement
-    touches nodes on its axis: margin atan(0.3)."""
-    from jaxsqueeze.simulation import api, engine
-    margins = []
+    touches nodes on its axis: margin atan(0.3).
+
+    A map or a search over placements on edges that long warns before it squeezes
+    (PlacementResolutionWarning: up to asin(h / 2r) = 35.4 degrees off the normal against the
+    cone's 16.7, and the edge length that would do, 2 r sin(atan mu) = 5.75 mm); on the refined
+    mesh a map of placements near the fingers says nothing, while a search, which may go
+    anywhere on the boundary, still warns of the 12 mm edges elsewhere."""
+    import warnings
+
+    from jaxsqueeze.plan import search
+    from jaxsqueeze.simulation import api, engine, validate
+    margins, said = [], []
     for kw in ({}, dict(refine_near=[[0.05, 0.0], [-0.05, 0.0]], refine_edge=0.002)):
         mesh = jsq.shapes.ellipse(0.05, 0.035, max_edge=0.012, **kw)
         sc = jsq.Scene(mesh=mesh, material=MAT, fingers=jsq.Fingers(radius=0.01), friction=0.3, depth=0.006,
@@ -409,9 +418,27 @@ def test_a_fingertip_between_coarse_nodes_touches_one_tilted_and_refining_there_
         sc = sc.replace(placement=plan.Placement(s=(0.0, float(sc.curve().perimeter) / 2)))
         margin = jax.jit(lambda o, sc=sc: engine.make_model(o, api.grasp_of(sc, o), api.config_of(sc)).margin)
         margins.append(float(margin(sc.operator())))
+        X = np.array([[*np.asarray(sc.placement.s), 0.0]])
+        for everywhere in (False, True):
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                search._check(sc, X, None, everywhere=everywhere)
+            said.append([str(w.message) for w in caught if w.category is plan.PlacementResolutionWarning])
     assert margins[0] < np.arctan(0.3) - np.radians(35)
     assert margins[1] == pytest.approx(np.arctan(0.3), abs=1e-5)
     assert "refine_near" in jsq.Status.INFEASIBLE_GRIP.advice
+    assert [len(w) for w in said] == [1, 1, 0, 1], said
+    assert said[0][0].startswith("boundary edges 0.0116 m long under fingertips of radius 0.01 m: a placed fingertip "
+                                 "that lands between two nodes first touches one of them up to 35.4 deg off its "
+                                 "normal, beyond the friction cone's 16.7 deg (mu=0.3)")
+    assert said[0][0].endswith("edges of at most 2 r sin(atan mu) = 0.00575 m (max_edge, or refine_near)")
+    with warnings.catch_warnings(record=True) as caught:         # docs/planning.md: how to silence it
+        warnings.simplefilter("always")
+        warnings.simplefilter("ignore", plan.PlacementResolutionWarning)
+        search._check(sc, X, None, everywhere=True)
+    assert not caught
+    edge = 2 * 0.01 * np.sin(np.arctan(0.3))           # the tilt reaches the cone's edge: no warning yet
+    assert validate.placement_warning(edge, 0.01, 0.3) is None and validate.placement_warning(1.001 * edge, 0.01, 0.3)
 
 
 @pytest.mark.parametrize("s, angle, what", [((0.2047, 0.4498), -0.2135, "slips between nodes, through the object"),
