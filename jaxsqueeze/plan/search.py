@@ -29,7 +29,7 @@ from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
 from ..simulation import validate
 from ..simulation.status import Status
-from ..tracing import numeric
+from ..tracing import caller_level, numeric
 from .quality import adversary_work, grip_force, slip_margin, squeeze_work
 
 
@@ -129,7 +129,7 @@ def _check(scene: Scene, X, op, everywhere: bool = False):
         edges = _edges_under(scene, None if everywhere else X[:, :2])
         coarse = validate.placement_warning(float(edges.max()), float(scene.fingers.radius), float(scene.friction))
         if coarse:
-            warnings.warn(coarse, validate.PlacementResolutionWarning, stacklevel=3)
+            warnings.warn(coarse, validate.PlacementResolutionWarning, stacklevel=caller_level())
     return dataclasses.replace(op, field=None)   # (a static part: identity-hashed)
 
 
