@@ -281,7 +281,7 @@ def _said(spec, caught, quiet: bool) -> list:
     said = list(spec.warnings)
     for w in caught:
         text = str(w.message)
-        if not any(w.endswith(text) for w in said):          # the scene file's own, under its key
+        if not any(s.endswith(text) for s in said):          # the scene file's own, under its key
             said.append(text)
             if not quiet:
                 print(f"warning: {text}", file=sys.stderr)

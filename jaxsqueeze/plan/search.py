@@ -25,9 +25,9 @@ import numpy as np
 from .. import compiler
 from ..geometry.mesh import Mesh
 from ..numbers import real_array
+from ..simulation import validate
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
-from ..simulation import validate
 from ..simulation.status import Status
 from ..tracing import caller_level, numeric
 from .quality import adversary_work, grip_force, slip_margin, squeeze_work
