@@ -11,7 +11,7 @@ from jax import lax
 from jax.custom_batching import custom_vmap
 from jax.custom_derivatives import SymbolicZero
 
-from .engine import SUNK_TOLS, Config, Grasp, simulate
+from .engine import SUNK_TOLS, Config, Grasp, floating, simulate
 from . import laws
 from . import validate
 from ..geometry import boundary
@@ -199,17 +199,12 @@ def _jvp_of(fn):
                 return fn(*[next(it) if m else p for p, m in zip(ps, moving)])
 
             out, dout = jax.jvp(of_moving, tuple(p for p, m in zip(ps, moving) if m), ts)
-            return out, jax.tree.map(lambda o, t: t if _real(o) else jnp.zeros((), jnp.int8), out, dout)
+            return out, jax.tree.map(lambda o, t: t if floating(o) else jnp.zeros((), jnp.int8), out, dout)
 
         out, dout = _one_at_a_time(jvp, len(primals))(*primals, *(t for t, m in zip(tangents, moving) if m))
-        return out, jax.tree.map(lambda o, t: t if _real(o) else np.zeros(jnp.shape(o), jax.dtypes.float0), out, dout)
+        return out, jax.tree.map(lambda o, t: t if floating(o) else np.zeros(jnp.shape(o), jax.dtypes.float0), out, dout)
 
     return rule
-
-
-def _real(x) -> bool:
-    """Does ``x`` have a floating (differentiable) dtype?"""
-    return jnp.issubdtype(jnp.result_type(x), jnp.inexact)
 
 
 #: the contact and sliding slots an eager squeeze grew to, by object size, capacity settings
@@ -340,7 +335,7 @@ _first_order_only.defjvp(_pass_tangents, symbolic_zeros=True)
 def _run(op: Compliance, grasp: Grasp, cfg: Config):
     """The compiled squeeze: (SqueezeResult in SI without the full field, scaled final forces, g)."""
     leaves, tree = jax.tree.flatten((op, grasp))
-    real = [_real(x) for x in leaves]
+    real = [floating(x) for x in leaves]
     guarded = iter(_first_order_only(tuple(x for x, r in zip(leaves, real) if r)))
     op, grasp = jax.tree.unflatten(tree, [next(guarded) if r else x for x, r in zip(leaves, real)])
     st = batched_simulate(op, grasp, cfg)

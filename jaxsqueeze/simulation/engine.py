@@ -41,6 +41,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 from jax import lax
+from jax.custom_derivatives import SymbolicZero
 
 from .. import compiler
 from ..mechanics.operator import Compliance
@@ -784,7 +785,49 @@ def finish(model: Model, st: State, ok) -> State:
 
 # ----------------------------------------------------------------------------- the loop
 def _loop(model: Model, st: State) -> State:
-    return lax.while_loop(lambda s: s.status == RUNNING, lambda s: step(model, s), st)
+    return lax.while_loop(lambda s: s.status == RUNNING, lambda s: step(model, s), _seeded(model, st))
+
+
+def _seeded(model: Model, st: State) -> State:
+    """``st`` unchanged. Under ``jvp`` every float field but the contact slots (whose kept
+    factorization carries no tangent: :func:`contacts.solve` takes its rate by the implicit step)
+    and the statistics enters the loop with a tangent, a zero where it had none. JAX derives a
+    ``while_loop`` body again for as long as the last derivation gave more carries a tangent,
+    and under ``vmap`` (``jacfwd``) batches it again for as long as more carries become batched.
+    The squeeze starts with 3 such fields (the first touch) and its step gives 33: a placed
+    squeeze's ``jacfwd`` derived the whole step three times and batched it up to 15 times,
+    now once each (benchmarks/README.md, note of 2026-12-06 15:00)."""
+    carried = {f.name: getattr(st, f.name) for f in dataclasses.fields(st) if f.name not in ("slots", "stats")}
+    return _with(st, **_hint(carried, tuple(x for x in jax.tree.leaves(model) if floating(x))))
+
+
+@jax.custom_jvp
+def _hint(xs, inputs):
+    """``xs`` (a pytree). Its derivative is that of ``xs`` with every float leaf whose tangent
+    is a symbolic zero given a zero that depends on the first of ``inputs`` that moves (so that
+    under ``vmap`` of the ``jvp`` it is batched as well; a non-finite tangent there gives 0)."""
+    return xs
+
+
+def _hint_jvp(primals, tangents):
+    xs, _ = primals
+    dxs, dinputs = tangents
+    moving = [t for t in dinputs if not isinstance(t, SymbolicZero) and jnp.size(t)]
+    if not moving:
+        return xs, dxs
+    t0 = jnp.ravel(moving[0])[0]
+    zero = jnp.where(jnp.isfinite(t0), t0 * 0, 0)
+    fill = lambda x, t: (jnp.broadcast_to(zero.astype(x.dtype), jnp.shape(x))  # noqa: E731
+                         if isinstance(t, SymbolicZero) and floating(x) else t)
+    return xs, jax.tree.map(fill, xs, dxs)
+
+
+_hint.defjvp(_hint_jvp, symbolic_zeros=True)
+
+
+def floating(x) -> bool:
+    """Does ``x`` have a floating (differentiable) dtype?"""
+    return jnp.issubdtype(jnp.result_type(x), jnp.inexact)
 
 
 def run(model: Model, st: State) -> State:
