@@ -796,7 +796,7 @@ def _seeded(model: Model, st: State) -> State:
     and under ``vmap`` (``jacfwd``) batches it again for as long as more carries become batched.
     The squeeze starts with 3 such fields (the first touch) and its step gives 33: a placed
     squeeze's ``jacfwd`` derived the whole step three times and batched it up to 15 times,
-    now once each (benchmarks/README.md, note of 2026-12-06 15:00)."""
+    now once each (benchmarks/README.md, note of 2026-12-06 14:10)."""
     carried = {f.name: getattr(st, f.name) for f in dataclasses.fields(st) if f.name not in ("slots", "stats")}
     return _with(st, **_hint(carried, tuple(x for x in jax.tree.leaves(model) if floating(x))))
 
