@@ -289,6 +289,29 @@ def test_stats_and_records_of_a_full_squeeze(model):
     np.testing.assert_array_equal(slot < model.cfg.capacity, mode > FREE)
 
 
+def test_the_loop_state_enters_a_jvp_with_a_finite_zero_tangent_in_every_float_field(model, first):
+    """engine._seeded: the identity on the state; under jvp in the model every float field but
+    the slots and the statistics gets a tangent (zero where the state had none, also when an
+    input's tangent is not finite), so JAX derives the loop body once (benchmarks/README.md)."""
+    floats = lambda m, v: jax.tree.map(  # noqa: E731
+        lambda x: np.full(np.shape(x), v) if engine.floating(x) else np.zeros(np.shape(x), jax.dtypes.float0), m)
+    for v in (1.0, np.nan):
+        out, dout = jax.jvp(lambda m: engine._seeded(m, first), (model,), (floats(model, v),))
+        assert jax.tree.all(jax.tree.map(lambda a, b: bool(np.array_equal(a, b, equal_nan=True)), out, first))
+        for field in dataclasses.fields(first):
+            for t in jax.tree.leaves(getattr(dout, field.name)):
+                if t.dtype != jax.dtypes.float0:
+                    np.testing.assert_array_equal(np.asarray(t), 0.0, err_msg=field.name)
+    # the zeros depend on the input's tangent: under jacfwd's vmap they are batched from the start
+    tangents = jax.tree.map(lambda x: jnp.stack([x, x]) if x.dtype != jax.dtypes.float0 else np.zeros((2,) + x.shape, x.dtype),
+                            floats(model, 1.0))
+    with pytest.raises(ValueError, match="out_axes"):
+        jax.vmap(lambda t: jax.jvp(lambda m: engine._seeded(m, first), (model,), (t,))[1].F, out_axes=None)(tangents)
+    # the tangents a field already has pass through
+    x, dx = jax.jvp(lambda a: engine._hint({"x": 2 * a, "k": jnp.int32(1)}, (a,)), (jnp.float64(1.0),), (jnp.float64(3.0),))
+    assert float(x["x"]) == 2.0 and float(dx["x"]) == 6.0 and dx["k"].dtype == jax.dtypes.float0
+
+
 def test_update_makes_and_breaks_contacts_keeping_the_inverse_and_the_node_map(model):
     """contacts.update from the grip pair to four contacts, then two leave and one joins: the
     node -> slot map inverts the slots, and the bordered inverse kept by bordering updates equals
