@@ -166,7 +166,10 @@ def _one_at_a_time(fn, primals: int | None = None):
             out = fn(*xs)
             return out, every(out, False)
         if primals is not None and not any(flags[:primals]):
-            out = jax.vmap(fn, in_axes=[0 if f else None for f in flags], out_axes=(None, 0))(*xs)
+            # one squeeze with its tangents batched; a batch of members around it (vmap of
+            # jacfwd) comes back through this rule
+            tangents = jax.vmap(fn, in_axes=[0 if f else None for f in flags], out_axes=(None, 0))
+            out = _one_at_a_time(tangents)(*xs)
             return out, (every(out[0], False), every(out[1], True))
         if compiler.platform() != "cpu":
             full = [x if f else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x)) for x, f in zip(xs, flags)]
