@@ -133,7 +133,8 @@ def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
     loop of single squeezes costs. (A batched ``lax.while_loop`` runs every member's event
     location at every step, and its small solves one lane at a time: 10–20× slower per grasp.)
     On an accelerator the batch is vmapped. When only forward-mode tangents are batched
-    (``jax.jacfwd``) it is one squeeze.
+    (``jax.jacfwd``) it is one squeeze, and a ``vmap`` of ``jacfwd`` runs its members one
+    after another in the same way.
 
     Its derivative is its own rule (:func:`_jvp_of`): the ``jvp`` of :func:`simulate` in the
     inputs that carry a tangent (``custom_vmap``'s own rule would give every input a tangent
