@@ -18,7 +18,8 @@ from threadpoolctl import threadpool_limits
 
 from .material import Material
 from ..geometry.mesh import Mesh
-from ..tracing import as_array
+from ..batching import one_at_a_time
+from ..tracing import as_array, is_concrete
 from .operator import Compliance, FieldMap, rigid_modes
 
 METHODS = ("sparse", "dense", "spectral")
@@ -153,6 +154,10 @@ def compliance(mesh: Mesh, material: Material, method: str = "sparse") -> Compli
         G, fmap = _sparse_build(mesh, material.nu, pts, bdofs, pins)
     else:
         build = _dense_build if method == "dense" else _spectral_build
+        if not is_concrete(material.nu):
+            # one member at a time under a vmap on the CPU: batched LAPACK calls (the primal
+            # and tangent solves of a vmap of jacfwd in nu) can wait on each other forever
+            build = one_at_a_time(build)
         Gnb = build(jnp.asarray(pts), jnp.asarray(mesh.triangles), material.nu, jnp.asarray(bdofs), jnp.asarray(pins))
         G = Gnb[bdofs]
         fmap = None if isinstance(Gnb, jax.core.Tracer) else _matrix_field(np.asarray(Gnb), pts)

@@ -321,6 +321,46 @@ def test_rigid_part_is_in_each_builds_gauge():
     assert abs(g_sparse[0]) > 1e-6 or abs(g_sparse[2]) > 1e-6             # the pinned support's gauge
 
 
+@pytest.mark.parametrize("method", ["dense", "spectral"])
+def test_vmap_of_jacfwd_in_nu_solves_one_member_at_a_time(method):
+    """A ``vmap`` of ``jacfwd`` in ν of the traced builds ran their primal and tangent LAPACK
+    solves batched over the members, and two batched solves at once waited on each other
+    forever on a 2-core CPU (mesh edge 0.006, 4 of 4 tries). Now no LAPACK call in the
+    program sees a member axis (their operands are single matrices), and the batch equals the
+    loop of single jacfwds and central differences."""
+    from physics import symmetric_square
+    mesh = symmetric_square(0.1, 0.02)
+    v = np.random.default_rng(0).normal(size=len(mesh.boundary) * 2)
+
+    def work(nu):            # a smooth scalar of the whole operator
+        G = fem.compliance(mesh, Material(E=1e5, nu=nu, thickness=0.01), method=method).G
+        return v @ G @ v
+
+    nus = jnp.array([0.2, 0.45])
+    batched = jax.vmap(jax.jacfwd(work))
+    lapack = [e for e in _equations(jax.make_jaxpr(batched)(nus).jaxpr)
+              if e.primitive.name in ("cholesky", "triangular_solve", "eigh", "lu")]
+    assert lapack and all(x.aval.ndim == 2 for e in lapack for x in e.invars), \
+        [(e.primitive.name, [x.aval.shape for x in e.invars]) for e in lapack]
+    d = np.asarray(batched(nus))
+    loop = np.array([jax.jacfwd(work)(nu) for nu in nus])
+    np.testing.assert_allclose(d, loop, rtol=1e-12)
+    h = 1e-6
+    fd = np.array([(work(nu + h) - work(nu - h)) / (2 * h) for nu in (0.2, 0.45)])
+    np.testing.assert_allclose(d, fd, rtol=1e-6)
+
+
+def _equations(jaxpr):
+    """Every equation of a jaxpr and of the jaxprs nested in it."""
+    for eqn in jaxpr.eqns:
+        yield eqn
+        for value in eqn.params.values():
+            for sub in value if isinstance(value, (list, tuple)) else [value]:
+                inner = getattr(sub, "jaxpr", sub)
+                if hasattr(inner, "eqns"):
+                    yield from _equations(inner)
+
+
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", ["rectangle", "annulus"])
 def test_deform_matches_direct_elimination(name, method):
