@@ -9,10 +9,8 @@ Layers, each importing only from the ones above it in this list:
 * :mod:`jaxsqueeze.post`       views, cones, plots, export
 * :mod:`jaxsqueeze.io`         scenefile, cli
 
-``jaxsqueeze.tracing`` (is a value a tracer), ``jaxsqueeze.numbers`` (is an input made of real
-numbers), ``jaxsqueeze.compiler`` (how the library's own programs are compiled) and
-``jaxsqueeze.batching`` (a ``vmap`` on the CPU that runs its members one at a time) serve
-every layer.
+``jaxsqueeze.tracing`` (is a value a tracer) and ``jaxsqueeze.numbers`` (is an input made of real
+numbers) serve every layer.
 
 The main names are imported here. The module names of version 0.1 (``jaxsqueeze.fem``,
 ``jaxsqueeze.scene``, ``jaxsqueeze.views``, ...) keep working as aliases of their new homes;

@@ -13,11 +13,6 @@ def is_concrete(x) -> bool:
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(x))
 
 
-def floating(x) -> bool:
-    """Does ``x`` have a floating (differentiable) dtype?"""
-    return bool(jax.numpy.issubdtype(jax.numpy.result_type(x), jax.numpy.inexact))
-
-
 def caller_level() -> int:
     """The ``stacklevel`` for ``warnings.warn`` called here that names the first frame outside
     the jaxsqueeze package: the user's line that asked for what the warning is about."""

@@ -18,8 +18,7 @@ from threadpoolctl import threadpool_limits
 
 from .material import Material
 from ..geometry.mesh import Mesh
-from ..batching import one_at_a_time
-from ..tracing import as_array, is_concrete
+from ..tracing import as_array
 from .operator import Compliance, FieldMap, rigid_modes
 
 METHODS = ("sparse", "dense", "spectral")
@@ -154,10 +153,6 @@ def compliance(mesh: Mesh, material: Material, method: str = "sparse") -> Compli
         G, fmap = _sparse_build(mesh, material.nu, pts, bdofs, pins)
     else:
         build = _dense_build if method == "dense" else _spectral_build
-        if not is_concrete(material.nu):
-            # one member at a time under a vmap on the CPU: batched LAPACK calls (the primal
-            # and tangent solves of a vmap of jacfwd in nu) can wait on each other forever
-            build = one_at_a_time(build)
         Gnb = build(jnp.asarray(pts), jnp.asarray(mesh.triangles), material.nu, jnp.asarray(bdofs), jnp.asarray(pins))
         G = Gnb[bdofs]
         fmap = None if isinstance(Gnb, jax.core.Tracer) else _matrix_field(np.asarray(Gnb), pts)
@@ -190,8 +185,26 @@ def _dense_build(pts, triangles, nu, bdofs, pins):
     Kp = jnp.where(keep[:, None] & keep[None, :], K, 0.0) + jnp.diag(jnp.where(keep, 0.0, 1.0))
     rhs = jnp.zeros((n2, bdofs.shape[0]), K.dtype).at[bdofs, jnp.arange(bdofs.shape[0])].set(1.0)
     rhs = jnp.where(keep[:, None], rhs, 0.0)
-    chol = jax.scipy.linalg.cho_factor(Kp, lower=True)
-    return jax.scipy.linalg.cho_solve(chol, rhs)
+    return _spd_solve(Kp, rhs)
+
+
+@jax.custom_jvp
+def _spd_solve(A, B):
+    """A⁻¹ B for a symmetric positive definite (k, k) A and (k, c) B, by Cholesky."""
+    return jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(A, lower=True), B)
+
+
+@_spd_solve.defjvp
+def _spd_solve_jvp(primals, tangents):
+    """d(A⁻¹B) = A⁻¹(dB − dA A⁻¹B), with A's factor, after the value. JAX's own rules solve
+    for Cholesky's tangent beside the value's solves; batched over a ``vmap`` on the CPU,
+    jaxlib's LAPACK solves each hold an XLA pool thread while they wait for another, and two
+    at once waited forever on 2 cores (``jax.vmap(jax.jacfwd(...))`` in ν: docs/numerics.md,
+    finding 28). Here every solve needs the one before. Linear in (dA, dB): reverse mode works."""
+    (A, B), (dA, dB) = primals, tangents
+    chol = jax.scipy.linalg.cho_factor(A, lower=True)
+    X = jax.scipy.linalg.cho_solve(chol, B)
+    return X, jax.scipy.linalg.cho_solve(chol, dB - dA @ X)
 
 
 @jax.jit

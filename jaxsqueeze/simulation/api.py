@@ -8,16 +8,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
+from jax.custom_batching import custom_vmap
+from jax.custom_derivatives import SymbolicZero
 
-from .engine import SUNK_TOLS, Config, Grasp, simulate
+from .engine import SUNK_TOLS, Config, Grasp, floating, simulate
 from . import laws
 from . import validate
 from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..batching import one_at_a_time
-from ..tracing import as_array, differentiated, floating, forward_levels, is_concrete, reverse_mode
+from ..tracing import as_array, differentiated, forward_levels, is_concrete, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
 from .scene import EVENTS, LOG_GROWTH, STEPS, Scene, stiffness_of
@@ -135,13 +136,79 @@ def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
     (``jax.jacfwd``) it is one squeeze, and a ``vmap`` of ``jacfwd`` runs its members one
     after another in the same way.
 
-    Its derivative and batching rules are :func:`jaxsqueeze.batching.one_at_a_time`'s."""
+    Its derivative is its own rule (:func:`_jvp_of`): the ``jvp`` of :func:`simulate` in the
+    inputs that carry a tangent (``custom_vmap``'s own rule would give every input a tangent
+    of zeros, and derive the whole program once more before the batching rule replaces it),
+    batched by the same rule. The rules see the arguments as a flat list of arrays:
+    ``custom_vmap`` cannot take a pytree with an empty (None) node, such as a band's ``nu``
+    or an absent placement."""
     leaves, tree = jax.tree.flatten((op, grasp))
 
     def sim(*xs):
         return simulate(*jax.tree.unflatten(tree, xs), cfg)
 
-    return one_at_a_time(sim)(*leaves)
+    run = jax.custom_jvp(_one_at_a_time(sim))
+    run.defjvp(_jvp_of(sim), symbolic_zeros=True)
+    return run(*leaves)
+
+
+def _one_at_a_time(fn, primals: int | None = None):
+    """``fn`` (flat arrays → pytree) with the batching rule of :func:`batched_simulate`.
+    ``primals``: for ``fn(*primals, *tangents)``, how many arguments are primals; a batch of
+    tangents alone is then vmapped (one squeeze, its tangents batched)."""
+    @custom_vmap
+    def run(*xs):
+        return fn(*xs)
+
+    @run.def_vmap
+    def rule(axis_size, flags, *xs):
+        every = lambda out, b: jax.tree.map(lambda _: b, out)  # noqa: E731
+        if not any(flags):
+            out = fn(*xs)
+            return out, every(out, False)
+        if primals is not None and not any(flags[:primals]):
+            # one squeeze with its tangents batched; a batch of members around it (vmap of
+            # jacfwd) comes back through this rule
+            tangents = jax.vmap(fn, in_axes=[0 if f else None for f in flags], out_axes=(None, 0))
+            out = _one_at_a_time(tangents)(*xs)
+            return out, (every(out[0], False), every(out[1], True))
+        if compiler.platform() != "cpu":
+            full = [x if f else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x)) for x, f in zip(xs, flags)]
+            out = jax.vmap(fn)(*full)
+            return out, every(out, True)
+
+        def one(batched):
+            it = iter(batched)
+            return fn(*[next(it) if f else x for x, f in zip(xs, flags)])
+
+        out = lax.map(one, [x for x, f in zip(xs, flags) if f])
+        return out, every(out, True)
+
+    return run
+
+
+def _jvp_of(fn):
+    """The ``custom_jvp`` rule (with symbolic zeros) of ``fn`` (flat arrays → pytree): the
+    ``jvp`` in the arguments whose tangent is not a symbolic zero, batched by
+    :func:`_one_at_a_time`; integer outputs get ``float0`` tangents (outside the batching
+    rule: ``lax.map`` cannot carry ``float0``, so a placeholder passes through it)."""
+    def rule(primals, tangents):
+        moving = [not isinstance(t, SymbolicZero) for t in tangents]
+
+        def jvp(*xs):
+            ps, ts = xs[:len(primals)], xs[len(primals):]
+
+            def of_moving(*ys):
+                it = iter(ys)
+                return fn(*[next(it) if m else p for p, m in zip(ps, moving)])
+
+            out, dout = jax.jvp(of_moving, tuple(p for p, m in zip(ps, moving) if m), ts)
+            return out, jax.tree.map(lambda o, t: t if floating(o) else jnp.zeros((), jnp.int8), out, dout)
+
+        out, dout = _one_at_a_time(jvp, len(primals))(*primals, *(t for t, m in zip(tangents, moving) if m))
+        return out, jax.tree.map(lambda o, t: t if floating(o) else np.zeros(jnp.shape(o), jax.dtypes.float0), out, dout)
+
+    return rule
 
 
 #: the contact and sliding slots an eager squeeze grew to, by object size, capacity settings

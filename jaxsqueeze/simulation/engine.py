@@ -44,7 +44,6 @@ from jax import lax
 from jax.custom_derivatives import SymbolicZero
 
 from .. import compiler
-from ..tracing import floating
 from ..mechanics.operator import Compliance
 from . import contacts, laws
 from .contacts import Nodes, Slots, Solution
@@ -824,6 +823,11 @@ def _hint_jvp(primals, tangents):
 
 
 _hint.defjvp(_hint_jvp, symbolic_zeros=True)
+
+
+def floating(x) -> bool:
+    """Does ``x`` have a floating (differentiable) dtype?"""
+    return jnp.issubdtype(jnp.result_type(x), jnp.inexact)
 
 
 def run(model: Model, st: State) -> State:

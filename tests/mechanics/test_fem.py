@@ -321,44 +321,59 @@ def test_rigid_part_is_in_each_builds_gauge():
     assert abs(g_sparse[0]) > 1e-6 or abs(g_sparse[2]) > 1e-6             # the pinned support's gauge
 
 
-@pytest.mark.parametrize("method", ["dense", "spectral"])
-def test_vmap_of_jacfwd_in_nu_solves_one_member_at_a_time(method):
-    """A ``vmap`` of ``jacfwd`` in ν of the traced builds ran their primal and tangent LAPACK
-    solves batched over the members, and two batched solves at once waited on each other
-    forever on a 2-core CPU (mesh edge 0.006, 4 of 4 tries). Now no LAPACK call in the
-    program sees a member axis (their operands are single matrices), and the batch equals the
-    loop of single jacfwds and central differences."""
+# vmap of jacfwd in nu of the dense build, on a mesh where it waited forever (edge 6 mm:
+# 4 of 4 tries on 2 cores before the fix), in a child process so that a regression fails
+# instead of hanging the suite
+VMAP_JACFWD_NU = r"""
+import json, sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp, numpy as np
+from jaxsqueeze.mechanics import fem
+from jaxsqueeze.mechanics.material import Material
+from physics import symmetric_square
+mesh = symmetric_square(0.1, 0.006)
+v = np.random.default_rng(0).normal(size=2 * len(mesh.boundary))
+work = lambda nu: v @ fem.compliance(mesh, Material(E=1e5, nu=nu, thickness=0.01), method="dense").G @ v
+nus = jnp.array([0.2, 0.45])
+batched = jax.vmap(jax.jacfwd(work))(nus)
+loop = [float(jax.jacfwd(work)(nu)) for nu in nus]
+fd = [float((work(nu + 1e-6) - work(nu - 1e-6)) / 2e-6) for nu in (0.2, 0.45)]
+print(json.dumps(dict(batched=np.asarray(batched).tolist(), loop=loop, fd=fd)))
+"""
+
+
+def test_vmap_of_jacfwd_in_nu_of_the_dense_build_finishes():
+    """docs/numerics.md, finding 28: the dense build's tangent is solved after its value, so
+    batched LAPACK solves never wait on each other; the batch equals the loop of single
+    jacfwds and central differences."""
+    import json
+    import os
+    import subprocess
+    import sys
+    here = os.path.dirname(os.path.abspath(__file__))
+    root = os.path.dirname(os.path.dirname(here))
+    env = dict(os.environ, JAX_PLATFORMS="cpu",
+               PYTHONPATH=os.pathsep.join([root, os.path.dirname(here), os.environ.get("PYTHONPATH", "")]))
+    out = subprocess.run([sys.executable, "-c", VMAP_JACFWD_NU], capture_output=True, text=True, env=env,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    np.testing.assert_allclose(r["batched"], r["loop"], rtol=1e-12)
+    np.testing.assert_allclose(r["batched"], r["fd"], rtol=1e-6)
+
+
+def test_dense_build_differentiates_in_nu_in_reverse_mode_too():
+    """The dense build's own tangent rule is linear, so jax.grad through it equals jax.jacfwd
+    (both equal central differences in the test above)."""
     from physics import symmetric_square
     mesh = symmetric_square(0.1, 0.02)
-    v = np.random.default_rng(0).normal(size=len(mesh.boundary) * 2)
+    v = np.random.default_rng(0).normal(size=2 * len(mesh.boundary))
 
-    def work(nu):            # a smooth scalar of the whole operator
-        G = fem.compliance(mesh, Material(E=1e5, nu=nu, thickness=0.01), method=method).G
-        return v @ G @ v
+    def work(nu):
+        return v @ fem.compliance(mesh, Material(E=1e5, nu=nu, thickness=0.01), method="dense").G @ v
 
-    nus = jnp.array([0.2, 0.45])
-    batched = jax.vmap(jax.jacfwd(work))
-    lapack = [e for e in _equations(jax.make_jaxpr(batched)(nus).jaxpr)
-              if e.primitive.name in ("cholesky", "triangular_solve", "eigh", "lu")]
-    assert lapack and all(x.aval.ndim == 2 for e in lapack for x in e.invars), \
-        [(e.primitive.name, [x.aval.shape for x in e.invars]) for e in lapack]
-    d = np.asarray(batched(nus))
-    loop = np.array([jax.jacfwd(work)(nu) for nu in nus])
-    np.testing.assert_allclose(d, loop, rtol=1e-12)
-    h = 1e-6
-    fd = np.array([(work(nu + h) - work(nu - h)) / (2 * h) for nu in (0.2, 0.45)])
-    np.testing.assert_allclose(d, fd, rtol=1e-6)
-
-
-def _equations(jaxpr):
-    """Every equation of a jaxpr and of the jaxprs nested in it."""
-    for eqn in jaxpr.eqns:
-        yield eqn
-        for value in eqn.params.values():
-            for sub in value if isinstance(value, (list, tuple)) else [value]:
-                inner = getattr(sub, "jaxpr", sub)
-                if hasattr(inner, "eqns"):
-                    yield from _equations(inner)
+    np.testing.assert_allclose(jax.grad(work)(0.3), jax.jacfwd(work)(0.3), rtol=1e-12)
 
 
 @pytest.mark.parametrize("method", METHODS)
