@@ -371,9 +371,9 @@ def test_dense_build_differentiates_in_nu_in_reverse_mode_too():
     v = np.random.default_rng(0).normal(size=2 * len(mesh.boundary))
 
     def work(nu):
-        return v @ fem.compliance(mesh, Material(E=1e5, nu=nu, thickness=0.01), method="dense").G @ v
+        return v @ jsq.fem.compliance(mesh, jsq.Material(E=1e5, nu=nu, thickness=0.01), "dense").G @ v
 
-    np.testing.assert_allclose(jax.grad(work)(0.3), jax.jacfwd(work)(0.3), rtol=1e-12)
+    np.testing.assert_allclose(jax.grad(work)(0.3), jax.jacfwd(work)(0.3), rtol=1e-12)     # (README)
 
 
 @pytest.mark.parametrize("method", METHODS)
