@@ -365,7 +365,7 @@ def test_vmap_of_jacfwd_in_nu_of_the_dense_build_finishes():
 
 def test_dense_build_differentiates_in_nu_in_reverse_mode_too():
     """The dense build's own tangent rule is linear, so jax.grad through it equals jax.jacfwd
-    (both equal central differences in the test above)."""
+    (the test above checks jacfwd against central differences)."""
     from physics import symmetric_square
     mesh = symmetric_square(0.1, 0.02)
     v = np.random.default_rng(0).normal(size=2 * len(mesh.boundary))
