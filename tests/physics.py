@@ -97,6 +97,27 @@ FLOAT64 = Bounds(balance=1e-7, circle=1e-10, sink=1e-6, force=1e-6)
 FLOAT32 = Bounds(balance=1e-5, circle=2e-6, sink=2e-5, force=1e-4)
 
 
+def stress_energy(mesh, material, sig) -> float:
+    """Strain energy [J] of per-triangle plane stresses sig (t, 3) = (σ_xx, σ_yy, τ_xy):
+    h/2 Σ A σ·C σ with the plane-stress compliance C = [[1, −ν, 0], [−ν, 1, 0], [0, 0, 2(1 + ν)]] / E
+    (textbook form, independent of the library's element code)."""
+    E, nu, h = float(material.E), float(material.nu), float(material.thickness)
+    C = np.array([[1, -nu, 0], [-nu, 1, 0], [0, 0, 2 * (1 + nu)]]) / E
+    p = np.asarray(mesh.points)[np.asarray(mesh.triangles)]
+    area = 0.5 * np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                        - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    sig = np.asarray(sig, float)
+    return float(0.5 * h * np.sum(area * np.einsum("ti,ij,tj->t", sig, C, sig)))
+
+
+def contact_work(res, row) -> float:
+    """½ Σ F·u over the contact nodes of a recorded row [J]: the work of the contact forces,
+    which equals the strain energy of the linear-elastic state they hold."""
+    on = np.asarray(res.modes[row]) > 0
+    F, u = np.asarray(res.forces[row], float), np.asarray(res.boundary_displacement[row], float)
+    return float(0.5 * np.sum(F[on] * u[on]))
+
+
 def check_states(res, mesh, mu, friction_model="coulomb", bounds=None):
     """Assert the invariants of every recorded state of a squeeze (SI units), to the
     :class:`Bounds` of the result's precision (``FLOAT32`` for float32 forces) unless given."""

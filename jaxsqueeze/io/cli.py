@@ -365,8 +365,8 @@ def _simulate(spec, out, args, progress) -> int:
 
             paths.update({f"{k}_png": v for k, v in plots.save_all(res, scene, tmp).items()})
         progress.start("export", "writing ParaView files")
-        paths["xdmf"] = export.write_paraview(tmp, res, scene.mesh, op=op)
-        paths["vtu"] = export.write_final_vtu(os.path.join(tmp, "final.vtu"), res, scene.mesh)
+        paths["xdmf"] = export.write_paraview(tmp, res, scene, op=op)
+        paths["vtu"] = export.write_final_vtu(os.path.join(tmp, "final.vtu"), res, scene)
         progress.done()
         progress.timings["total"] = time.perf_counter() - progress.t0
 

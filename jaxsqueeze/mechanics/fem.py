@@ -29,15 +29,9 @@ _D0 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 0.5))     # the plane-stress
 _D1 = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -0.5))
 
 
-def element_stiffness(xy: jax.Array, nu) -> jax.Array:
-    """Plane-stress CST stiffness (6, 6) of one triangle for E = 1, thickness = 1.
-
-    Args:
-        xy: (3, 2) vertex coordinates, counterclockwise (any length unit).
-        nu: Poisson's ratio.
-    Returns:
-        (6, 6) matrix for DOFs (x0, y0, x1, y1, x2, y2); energy (1) is ½ uᵀ k u.
-    """
+def _strain_matrix(xy: jax.Array):
+    """CST strain-displacement matrix B (3, 6), with ε = (ε_xx, ε_yy, γ_xy) = B u_e for DOFs
+    (x0, y0, x1, y1, x2, y2), and the area of one counterclockwise triangle xy (3, 2)."""
     x, y = xy[:, 0], xy[:, 1]
     b = jnp.array([y[1] - y[2], y[2] - y[0], y[0] - y[1]])
     c = jnp.array([x[2] - x[1], x[0] - x[2], x[1] - x[0]])
@@ -48,9 +42,59 @@ def element_stiffness(xy: jax.Array, nu) -> jax.Array:
         jnp.stack([z, c], 1).reshape(6),
         jnp.stack([c, b], 1).reshape(6),
     ]) / (2 * area)
-    # D = [[1, ν, 0], [ν, 1, 0], [0, 0, (1 − ν)/2]] / (1 − ν²) from numpy constants, for the same reason
-    D = (np.array(_D0, xy.dtype) + nu * np.array(_D1, xy.dtype)) / (1 - nu**2)
-    return area * Bm.T @ D @ Bm
+    return Bm, area
+
+
+def _elasticity(nu, dtype):
+    """Plane-stress D (3, 3) for E = 1: [[1, ν, 0], [ν, 1, 0], [0, 0, (1 − ν)/2]] / (1 − ν²),
+    from numpy constants (for the same reason as ``z`` above)."""
+    return (np.array(_D0, dtype) + nu * np.array(_D1, dtype)) / (1 - nu**2)
+
+
+def element_stiffness(xy: jax.Array, nu) -> jax.Array:
+    """Plane-stress CST stiffness (6, 6) of one triangle for E = 1, thickness = 1.
+
+    Args:
+        xy: (3, 2) vertex coordinates, counterclockwise (any length unit).
+        nu: Poisson's ratio.
+    Returns:
+        (6, 6) matrix for DOFs (x0, y0, x1, y1, x2, y2); energy (1) is ½ uᵀ k u.
+    """
+    Bm, area = _strain_matrix(xy)
+    return area * Bm.T @ _elasticity(nu, xy.dtype) @ Bm
+
+
+def _corner_stress(xy, ue, nu):
+    Bm, _ = _strain_matrix(xy)
+    return _elasticity(nu, xy.dtype) @ (Bm @ ue.reshape(6))
+
+
+@jax.jit
+def _stress(points, triangles, u, nu):
+    return jax.vmap(_corner_stress, in_axes=(0, 0, None))(points[triangles], u[triangles], nu)
+
+
+def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
+    """Plane stress of every triangle (t, 3) = (σ_xx, σ_yy, τ_xy) [Pa] for nodal displacements
+    ``displacement`` (n, 2) [m], e.g. ``result.displacement`` or
+    :func:`jaxsqueeze.views.row_displacement`. Linear CST elements: the strain, and so the
+    stress, is constant over each triangle; σ = E D(ν) ε with ε = (ε_xx, ε_yy, γ_xy) (the
+    engineering shear strain), σ_zz = 0; rigid motions give zero stress. A pure JAX function of
+    the displacement and the material: ``jax.jit`` (with the mesh static), ``vmap``, ``jvp``
+    and ``grad`` apply."""
+    u = jnp.asarray(displacement)
+    if u.shape != (mesh.n, 2):
+        raise ValueError(f"displacement must be (n, 2) = {(mesh.n, 2)} nodal displacements [m] of the mesh, "
+                         f"got shape {u.shape}")
+    pts = jnp.asarray(mesh.points, u.dtype)
+    return material.E * _stress(pts, jnp.asarray(mesh.triangles), u, material.nu)
+
+
+def von_mises(stress) -> jax.Array:
+    """Von Mises equivalent stress [Pa] of plane stresses (..., 3) = (σ_xx, σ_yy, τ_xy), σ_zz = 0:
+    √(σ_xx² − σ_xx σ_yy + σ_yy² + 3 τ_xy²)."""
+    sxx, syy, txy = stress[..., 0], stress[..., 1], stress[..., 2]
+    return jnp.sqrt(sxx**2 - sxx * syy + syy**2 + 3 * txy**2)
 
 
 #: element stiffnesses (t, 6, 6) from the triangles' corners (t, 3, 2), lifted from the kernel

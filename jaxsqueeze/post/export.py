@@ -25,6 +25,17 @@ name                       shape    meaning
                                     (``mesh.source``; the output numbers nodes as the mesh does)
 =========================  =======  ============================================================
 
+Cell data, written when the object passed is the squeezed scene of a solid mesh (it gives the
+material; the CLI passes it), one value per triangle (the plane stress of linear triangles is
+constant in each, :func:`jaxsqueeze.views.row_stress`):
+
+=========================  =======  ============================================================
+``stress_xx``, ``stress_yy``, ``stress_xy``  (t,)  plane stress components σ_xx, σ_yy, τ_xy [Pa]
+``von_mises``              (t,)     von Mises equivalent stress [Pa]
+=========================  =======  ============================================================
+
+They are NaN at rows whose full displacement field is unknown (``full_field`` 0, see below).
+
 The full displacement field. A result stores it only at the final depth. Linear elasticity
 with a fixed contact set is linear in the contact data but not in the depth across events, so
 rows are never interpolated. Instead, when the compliance operator is given (``op=`` i.e.
@@ -63,7 +74,6 @@ def row_point_data(res, mesh, row: int, op=None) -> dict:
     r = views.row_index(res, row)
     n = mesh.n
     B = np.asarray(mesh.boundary)
-    k_last = len(np.asarray(res.depth)) - 1
     modes = np.asarray(res.modes[r]).astype(np.int32)
     fg = np.asarray(res.finger[r]).astype(np.int32)
     ub = np.zeros((n, 2))
@@ -74,12 +84,8 @@ def row_point_data(res, mesh, row: int, op=None) -> dict:
     mode[B] = modes
     finger = np.full(n, -1, np.int32)
     finger[B] = np.where(modes > 0, fg, -1)
-    if r == k_last and res.displacement is not None:
-        u, full = np.asarray(res.displacement, float), 1
-    elif op is not None and op.field is not None:
-        u, full = views.row_displacement(res, op, r), 1
-    else:
-        u, full = ub, 0
+    u = views.row_field(res, r, op)
+    u, full = (ub, 0) if u is None else (u, 1)
     out = dict(displacement=_pad3(u), boundary_displacement=_pad3(ub), contact_force=_pad3(F),
                mode=mode, finger=finger, full_field=np.full(n, full, np.int32),
                depth=np.full(n, float(res.depth[r])), push=np.full(n, float(np.asarray(res.push)[r])))
@@ -89,12 +95,36 @@ def row_point_data(res, mesh, row: int, op=None) -> dict:
     return out
 
 
+STRESS_FIELDS = ("stress_xx", "stress_yy", "stress_xy", "von_mises")
+
+
+def row_cell_data(res, scene, row: int, op=None) -> dict:
+    """The cell data dict of one recorded row (see the module docstring): meshio's layout, one
+    list with a (t,) array per field; NaN where the row's full field is unknown."""
+    from ..mechanics.fem import von_mises
+
+    u = views.row_field(res, row, op)
+    if u is None:
+        sig = np.full((len(np.asarray(scene.mesh.triangles)), 3), np.nan)
+    else:
+        sig = views.row_stress(res, scene, row, displacement=u)
+    cols = (sig[:, 0], sig[:, 1], sig[:, 2], np.asarray(von_mises(sig), float))
+    return {name: [col] for name, col in zip(STRESS_FIELDS, cols)}
+
+
+def _stress_scene(obj):
+    """The scene whose material gives the stresses: ``obj`` when it is a scene of a solid mesh."""
+    from ..simulation.scene import Scene
+    return obj if isinstance(obj, Scene) and hasattr(obj.mesh, "triangles") else None
+
+
 def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     """Write ``<path_dir>/<name>.xdmf`` (+ ``.h5``): one time step per recorded row.
 
     Args:
         path_dir: output folder (created if missing).
-        res: squeeze result; mesh: its :class:`~jaxsqueeze.mesh.Mesh` (or band, or the scene).
+        res: squeeze result; mesh: its :class:`~jaxsqueeze.mesh.Mesh` (or band, or the scene:
+            the scene of a solid mesh adds the stresses as cell data).
         op: optional compliance operator (``scene.operator()``) to write the exact full
             displacement field at every row (see the module docstring).
     Returns the path of the .xdmf file. Read it back with ``meshio.xdmf.TimeSeriesReader``.
@@ -102,6 +132,7 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     import meshio
 
     res = views.trimmed(res)
+    scene = _stress_scene(mesh)
     mesh = views.check_object(res, mesh)
     if op is not None:
         views.check_object(res, op, "operator", takes=("operator",))
@@ -115,7 +146,8 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     with _TimeSeriesWriter(path) as w:
         w.write_points_cells(_points3(mesh), cells)
         for k in range(len(np.asarray(res.depth))):
-            w.write_data(k, point_data=row_point_data(res, mesh, k, op))
+            w.write_data(k, point_data=row_point_data(res, mesh, k, op),
+                         cell_data=None if scene is None else row_cell_data(res, scene, k, op))
     return path
 
 
@@ -137,19 +169,21 @@ def _TimeSeriesWriter(path):  # noqa: N802
 
 
 def write_final_vtu(path, res, mesh) -> str:
-    """Write the final state as one VTU (undeformed coordinates + point data as above;
-    use "Warp By Vector" on ``displacement`` to see the deformed shape)."""
+    """Write the final state as one VTU (undeformed coordinates + point data as above, and the
+    stresses as cell data when ``mesh`` is the scene of a solid mesh; use "Warp By Vector" on
+    ``displacement`` to see the deformed shape)."""
     import meshio
 
     res = views.trimmed(res)
+    scene = _stress_scene(mesh)
     mesh = views.check_object(res, mesh)
     path = views.output_path(path, "VTU file")
     if os.path.isdir(path) or os.path.splitext(path)[1].lower() not in (".vtu", ".vtk"):
         raise ValueError(f"VTU file {path!r}: expected a file name ending in .vtu (or .vtk)")
     views.make_folder(os.path.dirname(path))
     data = row_point_data(res, mesh, -1)
-    meshio.write(path, meshio.Mesh(_points3(mesh), [_cells(mesh)],
-                                   point_data=data))
+    cells = None if scene is None else row_cell_data(res, scene, -1)
+    meshio.write(path, meshio.Mesh(_points3(mesh), [_cells(mesh)], point_data=data, cell_data=cells))
     return str(path)
 
 

@@ -64,7 +64,7 @@ def _is_band(mesh) -> bool:
 
 
 def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=None, title=None,
-                  show_nodes=True, details=True, legend=True, forces=None) -> Figure:
+                  show_nodes=True, details=True, legend=True, forces=None, stress=None) -> Figure:
     """Deformed object, fingertips and contact modes at one recorded row (Fig. 4).
 
     Draws the undeformed outline (dashed), the deformed mesh (light triangles; the full
@@ -84,6 +84,11 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             the longer arrow is a quarter of the object's size). Default: on for a band
             (:class:`~jaxsqueeze.band.Band`, drawn as its deformed polyline through the
             nodes), off for a mesh.
+        stress: colour the deformed triangles by their plane stress [Pa]
+            (:func:`jaxsqueeze.views.row_stress`): ``"von_mises"``, ``"xx"``, ``"yy"`` or
+            ``"xy"``, with a colour bar. Needs the scene of a solid mesh as ``mesh`` (it gives
+            the material); at a row other than the last the field is rebuilt through
+            ``scene.operator()`` unless ``displacement`` is given.
     """
     res = views.trimmed(res)
     obj = mesh
@@ -99,6 +104,14 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     if forces is None:
         forces = _is_band(mesh)
     r = views.row_index(res, row)
+    if stress is not None:
+        if stress not in STRESS_NAMES:
+            raise ValueError(f"stress = {stress!r}: expected one of {tuple(STRESS_NAMES)} or None")
+        views.check_object(res, obj, "scene (stress= needs its material)", takes=("scene",))
+        if _is_band(mesh):
+            raise ValueError("stress= needs a solid mesh; a band has no triangles")
+        if displacement is None:
+            displacement = views.row_field(res, r, obj.operator())
     last = r == len(np.asarray(res.depth)) - 1
     # no fingertips to draw or zoom on when a placement never found its squeeze line (NaN centres)
     placed = bool(np.all(np.isfinite(np.asarray(res.centres[r], float))))
@@ -114,9 +127,9 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
             away = C[f] - np.asarray(mesh.offset, float)
             away = away / max(np.linalg.norm(away), 1e-300)
             plot_deformed(res, obj, r, displacement, zoom=(C[f] - away * float(res.radius), h), ax=sub,
-                          title=f"finger {f} (close-up)", legend=False, forces=forces)
+                          title=f"finger {f} (close-up)", legend=False, forces=forces, stress=stress)
         plot_deformed(res, obj, r, displacement, ax=ax, title=title, show_nodes=show_nodes, legend="figure",
-                      forces=forces)
+                      forces=forces, stress=stress)
         return fig
     if ax is None:
         fig = Figure(figsize=(8, 6.5), dpi=DPI, layout="constrained")
@@ -138,6 +151,8 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     if displacement is not None and not _is_band(mesh):
         X = P + np.asarray(displacement, float)
         tri = Triangulation(X[:, 0] * MM, X[:, 1] * MM, np.asarray(mesh.triangles))
+        if stress is not None:
+            _stress_colours(ax, tri, views.row_stress(res, obj, r, displacement=displacement), stress, legend)
         ax.triplot(tri, color="0.75", lw=0.4, zorder=2)
     for lp in _boundary_loops(mesh):
         q = P[B[lp]] + ub[lp]
@@ -225,6 +240,27 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     ax.set_title(title or f"Deformed object at {_title_state(res, r)} — {status}")
     ax.grid(True, lw=0.3, alpha=0.5)
     return fig
+
+
+#: plot_deformed's stress= choices: (label, column of row_stress or None for von Mises)
+STRESS_NAMES = {"von_mises": ("von Mises stress", None), "xx": ("σ_xx", 0), "yy": ("σ_yy", 1), "xy": ("τ_xy", 2)}
+
+
+def _stress_colours(ax, tri, sig, name, bar):
+    """Fill the triangles by one stress value [Pa]: von Mises from white to black, a component
+    on a diverging map centred on zero; a colour bar beside ``ax`` when ``bar``."""
+    from ..mechanics.fem import von_mises
+
+    label, col = STRESS_NAMES[name]
+    if col is None:
+        v, cmap, lo, hi = np.asarray(von_mises(sig), float), "Greys", 0.0, None
+    else:
+        v, cmap = sig[:, col], "PuOr_r"
+        hi = max(float(np.abs(v).max(initial=0.0)), 1e-300)
+        lo = -hi
+    art = ax.tripcolor(tri, facecolors=v, cmap=cmap, vmin=lo, vmax=hi, alpha=0.8, zorder=1.5)
+    if bar:
+        ax.figure.colorbar(art, ax=ax, label=f"{label} [Pa]", shrink=0.8)
 
 
 def _zoom(zoom):

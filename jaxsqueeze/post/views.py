@@ -1,8 +1,8 @@
 """Turn a :class:`~jaxsqueeze.grasp.SqueezeResult` into the paper's views (Section V-B).
 
-Pure numpy: every function takes a result (and sometimes the mesh or the compliance
-operator) and returns plain arrays, lists and dicts. Nothing here runs JAX code, so the
-views work on results loaded back from disk as well.
+Every function takes a result (and sometimes the mesh, the scene or the compliance operator)
+and returns plain numpy arrays, lists and dicts. Only :func:`row_stress` runs JAX code (the
+FEM's stress kernel); the views work on results loaded back from disk as well.
 
 Conventions
 -----------
@@ -456,6 +456,43 @@ def row_displacement(res, op, row: int = -1) -> np.ndarray:
                          f"{off:.3g} m of {scale:.3g} m): it was built for another material (E, nu, thickness) "
                          "than the result; pass scene.operator() of the squeezed scene")
     return u
+
+
+def row_field(res, row: int = -1, op=None) -> np.ndarray | None:
+    """(n, 2) exact displacement of every node at a recorded row [m], centroid frame: the
+    stored field at the final row, rebuilt through ``op`` (:func:`row_displacement`) at the
+    others; None where neither is at hand (no ``op``, or an operator without a field map)."""
+    res = trimmed(res)
+    r = row_index(res, row)
+    if r == len(np.asarray(res.depth)) - 1 and res.displacement is not None:
+        return np.asarray(res.displacement, float)
+    if op is not None and op.field is not None:
+        return row_displacement(res, op, r)
+    return None
+
+
+def row_stress(res, scene, row: int = -1, op=None, displacement=None) -> np.ndarray:
+    """(t, 3) plane stress (σ_xx, σ_yy, τ_xy) of every triangle at a recorded row [Pa]
+    (constant per triangle, :func:`jaxsqueeze.fem.element_stress`; von Mises:
+    :func:`jaxsqueeze.fem.von_mises`).
+
+    ``scene`` is the squeezed :class:`~jaxsqueeze.Scene` of a solid mesh (it gives the
+    triangles and the material). The displacement is ``displacement`` (n, 2) [m] if given,
+    else the stored field at the final row, else the row's field rebuilt through ``op``
+    (default ``scene.operator()``, cached per object).
+    """
+    from ..mechanics.fem import element_stress
+
+    res = trimmed(res)
+    mesh = check_object(res, scene, "scene", takes=("scene",))
+    if not hasattr(mesh, "triangles"):
+        raise ValueError("stresses need a solid mesh; a band (a curve with bending stiffness) has no triangles")
+    r = row_index(res, row)
+    if displacement is None:
+        displacement = row_field(res, r, op if op is not None else scene.operator())
+    else:
+        displacement = np.asarray(displacement, float)
+    return np.asarray(element_stress(mesh, scene.material, displacement), float)
 
 
 def json_ready(x):

@@ -147,8 +147,14 @@ def test_xdmf_reads_back(run_dir):
         assert reader.num_steps == s["rows"]
         depths = []
         for k in range(reader.num_steps):
-            t, pd, _ = reader.read_data(k)
+            t, pd, cd = reader.read_data(k)
             assert t == k
+            # stresses per triangle: their strain energy is the work of the row's contact forces
+            sig = np.c_[cd["stress_xx"][0], cd["stress_yy"][0], cd["stress_xy"][0]]
+            assert sig.shape == (len(mesh.triangles), 3) and cd["von_mises"][0].shape == (len(mesh.triangles),)
+            on = pd["mode"] > 0
+            work = 0.5 * np.sum(pd["contact_force"][on] * pd["displacement"][on])
+            assert abs(physics.stress_energy(mesh, spec.scene.material, sig) - work) <= 1e-9 * work + 1e-30
             for name in ("displacement", "boundary_displacement", "contact_force"):
                 assert pd[name].shape == (mesh.n, 3)
                 assert np.all(pd[name][:, 2] == 0)

@@ -221,16 +221,58 @@ def test_patch_test_linear_field(name, method):
     assert rel_err(f, traction_forces(mesh, sigma, MAT.thickness)[b]) <= 1e-9
 
 
+@pytest.mark.parametrize("name", ["lshape", "annulus"])
+def test_element_stress_is_hookes_law_and_its_energy_the_stiffness_energy(name):
+    """fem.element_stress: a linear field plus a rigid motion (a small rotation about the
+    centroid and a translation) gives every triangle Hooke's plane stress of sym(H), exactly;
+    the rigid part alone gives none; von Mises of uniaxial stress is |σ|, of pure shear √3 τ.
+    For a random field, h/2 Σ A σ·C σ (physics.stress_energy, the textbook compliance C)
+    equals ½ uᵀ K u of the assembled stiffness. jit, vmap, jvp and grad apply."""
+    from physics import stress_energy
+
+    mesh = mesh_of(name)
+    P = mesh.points
+    H = np.array([[1.0e-3, 4.0e-4], [-2.5e-4, -6.0e-4]])
+    rigid = np.array([2e-4, -1e-4]) + 3e-3 * np.c_[-P[:, 1], P[:, 0]]
+    sig = np.asarray(fem.element_stress(mesh, MAT, P @ H.T + rigid))
+    e = 0.5 * (H + H.T)
+    E, nu = MAT.E, MAT.nu
+    hooke = np.array([E / (1 - nu**2) * (e[0, 0] + nu * e[1, 1]), E / (1 - nu**2) * (e[1, 1] + nu * e[0, 0]),
+                      E / (1 + nu) * e[0, 1]])
+    assert sig.shape == (len(mesh.triangles), 3)
+    assert np.abs(sig - hooke).max() <= 1e-9 * np.abs(hooke).max()
+    assert np.abs(np.asarray(fem.element_stress(mesh, MAT, rigid))).max() <= 1e-9 * np.abs(hooke).max()
+    np.testing.assert_allclose(fem.von_mises(np.array([[-3.0, 0, 0], [0, 2.0, 0], [0, 0, 1.5]])), [3, 2, 1.5 * 3**0.5])
+    u = np.random.default_rng(4).normal(size=(mesh.n, 2)) * 1e-4
+    want = 0.5 * u.ravel() @ dense_K(mesh) @ u.ravel()
+    assert abs(stress_energy(mesh, MAT, fem.element_stress(mesh, MAT, u)) - want) <= 1e-12 * want
+    with pytest.raises(ValueError, match=r"displacement must be \(n, 2\)"):
+        fem.element_stress(mesh, MAT, u[:-1])
+    # transforms: jit with the mesh static, vmap over fields, jvp in the field (it is linear),
+    # grad in nu against central differences
+    du = np.roll(u, 1, axis=0)
+    one = jax.jit(fem.element_stress, static_argnums=0)
+    np.testing.assert_allclose(jax.vmap(lambda v: one(mesh, MAT, v))(np.stack([u, du]))[1],
+                               fem.element_stress(mesh, MAT, du), rtol=1e-12, atol=0)
+    _, tangent = jax.jvp(lambda v: fem.element_stress(mesh, MAT, v), (u,), (du,))
+    np.testing.assert_allclose(tangent, fem.element_stress(mesh, MAT, du), rtol=1e-12, atol=0)
+    size = lambda nu: jnp.sum(fem.element_stress(mesh, Material(MAT.E, nu, MAT.thickness), u) ** 2)  # noqa: E731
+    h = 1e-6
+    fd = (size(MAT.nu + h) - size(MAT.nu - h)) / (2 * h)
+    assert abs(jax.grad(size)(MAT.nu) - fd) <= 1e-7 * abs(fd)
+
+
 def test_converges_at_second_order_to_an_exact_solution():
     """Convergence under mesh refinement against an exact plane-stress solution that linear
     triangles cannot represent: u = grad(phi) with the harmonic phi = a^2 e^(x/a) cos(y/a) has
     div u = 0 and curl u = 0, so it satisfies Navier's equations without body force for any
     E and nu. Prescribed on every boundary node through the bordered system (jsq.deform), the
     interior displacement converges at second order (nodal error ~ h^2), and the element
-    strains at first order (structured meshes, so the refinement is exactly uniform)."""
+    strains and stresses (fem.element_stress) at first order (structured meshes, so the
+    refinement is exactly uniform)."""
     a = 0.05
     exact = lambda P: 1e-3 * a * np.exp(P[:, 0] / a)[:, None] * np.c_[np.cos(P[:, 1] / a), -np.sin(P[:, 1] / a)]  # noqa: E731
-    errs, strain_errs = [], []
+    errs, strain_errs, stress_errs = [], [], []
     for k in (8, 16, 32):             # uniform refinement: k x k squares of a 0.1 m square, two triangles each
         g = np.linspace(-0.05, 0.05, k + 1)
         X, Y = np.meshgrid(g, g, indexing="ij")
@@ -248,11 +290,18 @@ def test_converges_at_second_order_to_an_exact_solution():
         exact_grad = np.stack([np.c_[e * np.cos(c[:, 1] / a), -e * np.sin(c[:, 1] / a)],
                                np.c_[-e * np.sin(c[:, 1] / a), -e * np.cos(c[:, 1] / a)]], axis=1)
         strain_errs.append(np.abs(grad - exact_grad).max() / np.abs(exact_grad).max())
+        eps = np.c_[exact_grad[:, 0, 0], exact_grad[:, 1, 1], exact_grad[:, 0, 1] + exact_grad[:, 1, 0]]
+        exact_sig = MAT.E / (1 - MAT.nu**2) * np.c_[eps[:, 0] + MAT.nu * eps[:, 1], eps[:, 1] + MAT.nu * eps[:, 0],
+                                                    (1 - MAT.nu) / 2 * eps[:, 2]]
+        stress_errs.append(np.abs(np.asarray(fem.element_stress(mesh, MAT, u)) - exact_sig).max()
+                           / np.abs(exact_sig).max())
     order = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     strain_order = np.log2(np.array(strain_errs[:-1]) / np.array(strain_errs[1:]))
-    print("exact-solution convergence: nodal errors", errs, "orders", order, "strain orders", strain_order)
+    stress_order = np.log2(np.array(stress_errs[:-1]) / np.array(stress_errs[1:]))
+    print("exact-solution convergence: nodal errors", errs, "orders", order, "strain orders", strain_order,
+          "stress (fem.element_stress) orders", stress_order)
     assert errs[-1] < 1e-3
-    assert np.all(order > 1.8) and np.all(strain_order > 0.9)
+    assert np.all(order > 1.8) and np.all(strain_order > 0.9) and np.all(stress_order > 0.9)
 
 
 @pytest.mark.parametrize("method", METHODS)

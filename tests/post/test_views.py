@@ -7,7 +7,7 @@ import pytest
 
 import jaxsqueeze as jsq
 from jaxsqueeze.post import views
-from physics import nearest, symmetric_square
+from physics import contact_work, nearest, stress_energy, symmetric_square
 
 
 @pytest.fixture(scope="module")
@@ -34,6 +34,51 @@ def test_row_displacement_uses_the_recorded_rigid_part(offset):
     uk = views.row_displacement(res, op, k)
     bd = np.asarray(res.boundary_displacement[k])
     np.testing.assert_allclose(uk[np.asarray(res.nodes)], bd, rtol=0, atol=1e-10 * np.abs(bd).max())
+
+
+def test_stress_energy_is_the_work_of_the_contact_forces_in_views_exports_and_plots(offset, tmp_path):
+    """views.row_stress at the final row and at a middle one (rebuilt through the operator):
+    the strain energy of the stresses (physics.stress_energy, textbook compliance) equals
+    ½ Σ F·u of the row's contact forces (at the final row also jsq.quality.squeeze_work).
+    The exports carry the same stresses as cell data, only when given the scene (its material):
+    at every row with ``op``, NaN where the full field is unknown without it, and in the final
+    VTU. plot_deformed(stress=...) adds a colour bar; a mesh (no material) and an unknown name
+    are refused."""
+    import matplotlib
+    import meshio
+    matplotlib.use("Agg")
+    from jaxsqueeze.mechanics import fem
+    from jaxsqueeze.post import export, plots
+
+    scene, op, res = offset
+    k = len(res.depth) // 2
+    for row in (-1, k):
+        sig = views.row_stress(res, scene, row)
+        assert abs(stress_energy(scene.mesh, scene.material, sig) - contact_work(res, row)) <= 1e-9 * contact_work(res, row)
+    last = views.row_stress(res, scene)
+    assert abs(stress_energy(scene.mesh, scene.material, last) - float(jsq.quality.squeeze_work(res))) <= 1e-9 * np.abs(
+        float(jsq.quality.squeeze_work(res)))
+    vm = np.asarray(fem.von_mises(views.row_stress(res, scene, k)))
+    with meshio.xdmf.TimeSeriesReader(export.write_paraview(tmp_path / "op", res, scene, op)) as r:
+        r.read_points_cells()
+        cells = [r.read_data(i)[2] for i in range(r.num_steps)]
+    assert all(np.all(np.isfinite(c["von_mises"][0])) for c in cells)
+    np.testing.assert_allclose(cells[k]["von_mises"][0], vm, rtol=1e-12, atol=0)
+    with meshio.xdmf.TimeSeriesReader(export.write_paraview(tmp_path / "no_op", res, scene)) as r:
+        r.read_points_cells()
+        cells = [r.read_data(i)[2] for i in range(r.num_steps)]
+    assert all(np.all(np.isnan(c["stress_xx"][0])) for c in cells[:-1])
+    np.testing.assert_allclose(cells[-1]["stress_xx"][0], last[:, 0], rtol=1e-12, atol=0)
+    vtu = meshio.read(export.write_final_vtu(tmp_path / "final.vtu", res, scene))
+    np.testing.assert_allclose(vtu.cell_data["stress_xy"][0], last[:, 2], rtol=1e-12, atol=0)
+    assert not meshio.read(export.write_final_vtu(tmp_path / "mesh.vtu", res, scene.mesh)).cell_data
+    for row in (-1, k):
+        fig = plots.plot_deformed(res, scene, row, stress="von_mises", details=False)
+        assert [a.get_ylabel() for a in fig.axes][-1] == "von Mises stress [Pa]"
+    with pytest.raises(TypeError, match="stress= needs its material"):
+        plots.plot_deformed(res, scene.mesh, stress="xx")
+    with pytest.raises(ValueError, match="expected one of"):
+        plots.plot_deformed(res, scene, stress="mises")
 
 
 def test_exports_and_summary_refuse_or_survive_what_a_hostile_caller_passes(tmp_path):
