@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import tempfile
@@ -394,6 +395,14 @@ def _num(x, spec: str = ".3f", scale: float = 1.0) -> str:
     return "n/a" if x is None else format(float(x) * scale, spec)
 
 
+def _stress(x) -> str:
+    """A stress [Pa] of the summary in Pa, kPa, MPa or GPa (3 significant digits); None as "n/a"."""
+    if x is None:
+        return "n/a Pa"
+    k = min(max(int(math.floor(math.log10(abs(x)) / 3)), 0), 3) if x else 0
+    return f"{x / 1e3 ** k:.3g} {('Pa', 'kPa', 'MPa', 'GPa')[k]}"
+
+
 def _report(s, res, out, np) -> str:
     mm = 1e3
     lines = [f"jaxsqueeze: {s['title']}  ({s['scene_file']})",
@@ -417,6 +426,12 @@ def _report(s, res, out, np) -> str:
                      f"{len(cr['regions'])} region(s) [{regs}]")
         size = None if None in F else np.hypot(*F)
         lines.append(f"               total force on the object ({_num(F[0])}, {_num(F[1])}) N, |F| = {_num(size)} N")
+    st = s.get("stress")
+    if st is not None:
+        at = st["at"] or [None, None]
+        lines.append(f"  stress       largest von Mises {_stress(st['max_von_mises'])}, in triangle "
+                     f"{st['triangle'] if st['triangle'] is not None else 'n/a'} at ({_num(at[0], '.1f', mm)}, "
+                     f"{_num(at[1], '.1f', mm)}) mm")
     t = s.get("timings", {})
     lines.append("  time         " + ", ".join(f"{k} {v:.1f} s" for k, v in t.items()))
     lines.append(f"  outputs      {out}/: " + ", ".join(s["outputs"].values()))

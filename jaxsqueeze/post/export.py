@@ -98,12 +98,13 @@ def row_point_data(res, mesh, row: int, op=None) -> dict:
 STRESS_FIELDS = ("stress_xx", "stress_yy", "stress_xy", "von_mises")
 
 
-def row_cell_data(res, scene, row: int, op=None) -> dict:
-    """The cell data dict of one recorded row (see the module docstring): meshio's layout, one
-    list with a (t,) array per field; NaN where the row's full field is unknown."""
+def row_cell_data(res, scene, row: int, displacement=None) -> dict:
+    """The cell data dict of one recorded row (see the module docstring), in meshio's layout:
+    one list with a (t,) array per field. ``displacement`` (n, 2) [m] is the row's full field
+    (as in its point data); without it, the stored final field at the last row, NaN elsewhere."""
     from ..mechanics.fem import von_mises
 
-    u = views.row_field(res, row, op)
+    u = views.row_field(res, row) if displacement is None else displacement
     if u is None:
         sig = np.full((len(np.asarray(scene.mesh.triangles)), 3), np.nan)
     else:
@@ -146,8 +147,9 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     with _TimeSeriesWriter(path) as w:
         w.write_points_cells(_points3(mesh), cells)
         for k in range(len(np.asarray(res.depth))):
-            w.write_data(k, point_data=row_point_data(res, mesh, k, op),
-                         cell_data=None if scene is None else row_cell_data(res, scene, k, op))
+            pd = row_point_data(res, mesh, k, op)
+            u = pd["displacement"][:, :2] if pd["full_field"][0] else None
+            w.write_data(k, point_data=pd, cell_data=None if scene is None else row_cell_data(res, scene, k, u))
     return path
 
 

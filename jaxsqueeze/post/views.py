@@ -489,9 +489,9 @@ def row_stress(res, scene, row: int = -1, op=None, displacement=None) -> np.ndar
         raise ValueError("stresses need a solid mesh; a band (a curve with bending stiffness) has no triangles")
     r = row_index(res, row)
     if displacement is None:
-        displacement = row_field(res, r, op if op is not None else scene.operator())
-    else:
-        displacement = np.asarray(displacement, float)
+        displacement = row_field(res, r, op)
+    if displacement is None:                  # not stored at this row: rebuilt through the operator
+        displacement = row_field(res, r, scene.operator())
     return np.asarray(element_stress(mesh, scene.material, displacement), float)
 
 
@@ -511,6 +511,19 @@ def json_ready(x):
     return x
 
 
+def _largest_stress(res, scene) -> dict:
+    """summary's ``stress``: the largest von Mises stress at the final row and where it is."""
+    from ..mechanics.fem import von_mises
+
+    vm = np.asarray(von_mises(row_stress(res, scene)), float)
+    if not np.isfinite(vm).any():
+        return dict(max_von_mises=None, triangle=None, at=None)
+    k = int(np.nanargmax(vm))
+    mesh = scene.mesh
+    at = np.asarray(mesh.points, float)[np.asarray(mesh.triangles)[k]].mean(axis=0) + np.asarray(mesh.offset, float)
+    return dict(max_von_mises=float(vm[k]), triangle=k, at=[float(v) for v in at])
+
+
 def summary(res, scene=None, timings: dict | None = None) -> dict:
     """Everything a report needs, as JSON-ready Python types (:func:`json_ready`: a number that
     is NaN or infinite, as in a squeeze that failed at its first row, is None).
@@ -524,7 +537,9 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     whose unused points were dropped, grip_nodes_source: their numbers in the mesh file or the
     points given, ``mesh.source``), with an adversary
     squeeze_status and push [m] (the last push displacement), scene parameters (a band's nu is
-    None and its method "band"; a placed scene's placement s [m] and angle [rad]), and
+    None and its method "band"; a placed scene's placement s [m] and angle [rad]), for the scene
+    of a solid mesh ``stress`` at the final depth (:func:`row_stress`: max_von_mises [Pa], the
+    triangle holding it and that triangle's undeformed centroid ``at`` [m, user frame]), and
     ``timings`` [s] if given.
     """
     res = trimmed(res)
@@ -577,6 +592,8 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
             thickness=float(scene.material.thickness), radius=float(scene.fingers.radius),
             friction=float(scene.friction), friction_model=scene.friction_model, contact=scene.contact,
             method=scene.method if solid else "band")
+        if solid and res.displacement is not None:
+            out["stress"] = _largest_stress(res, scene)
         if scene.placement is not None:
             out["scene"]["placement"] = dict(s=[float(v) for v in np.asarray(scene.placement.s)],
                                              angle=float(scene.placement.angle))

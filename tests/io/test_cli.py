@@ -175,6 +175,11 @@ def test_xdmf_reads_back(run_dir):
             np.testing.assert_allclose(F[finger == f, :2].sum(0), s["total_force"][f"finger{f}"], atol=1e-9)
     vtu = meshio.read(out / "final.vtu")
     assert vtu.point_data["displacement"].shape == (mesh.n, 3)
+    # summary.json's largest von Mises stress is the final row's, where the file has it
+    vm = vtu.cell_data["von_mises"][0]
+    np.testing.assert_allclose(cd["von_mises"][0], vm, rtol=1e-12)
+    assert s["stress"]["triangle"] == int(np.argmax(vm)) and s["stress"]["max_von_mises"] == pytest.approx(vm.max())
+    np.testing.assert_allclose(s["stress"]["at"], (mesh.points + mesh.offset)[mesh.triangles[int(np.argmax(vm))]].mean(0))
 
 
 def test_help_subprocess():
@@ -498,6 +503,10 @@ def test_the_report_of_a_summary_with_nulls_says_n_a():
          "final_depth": None, "target_depth": 0.004, "relative_depth": None, "grip_distance": None, "rows": 3,
          "event_sequence": "", "n_events": 0, "contact_regions": {"finger0": regions, "finger1": regions},
          "total_force": {"finger0": [None, None], "finger1": [1.0, None]}, "timings": {}, "outputs": {}}
+    s["stress"] = {"max_von_mises": None, "triangle": None, "at": None}
     text = cli._report(s, None, "out", np)
+    assert "stress       largest von Mises n/a Pa, in triangle n/a at (n/a, n/a) mm" in text
+    assert [cli._stress(x) for x in (0.0, 0.5, 34840.45, 2.07e8, 2.1e11, 3e14)] == [
+        "0 Pa", "0.5 Pa", "34.8 kPa", "207 MPa", "210 GPa", "3e+05 GPa"]
     assert "final depth  n/a mm of 4.000 mm (n/a % of the grip distance n/a mm)" in text
     assert "total force on the object (1.000, n/a) N, |F| = n/a N" in text and "polar angle n/a..n/a deg" in text
