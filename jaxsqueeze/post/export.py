@@ -115,8 +115,9 @@ def row_cell_data(res, scene, row: int, displacement=None) -> dict:
 
 def _stress_scene(obj):
     """The scene whose material gives the stresses: ``obj`` when it is a scene of a solid mesh."""
+    from ..geometry.mesh import Mesh
     from ..simulation.scene import Scene
-    return obj if isinstance(obj, Scene) and hasattr(obj.mesh, "triangles") else None
+    return obj if isinstance(obj, Scene) and isinstance(obj.mesh, Mesh) else None
 
 
 def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:

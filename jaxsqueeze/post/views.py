@@ -481,11 +481,12 @@ def row_stress(res, scene, row: int = -1, op=None, displacement=None) -> np.ndar
     else the stored field at the final row, else the row's field rebuilt through ``op``
     (default ``scene.operator()``, cached per object).
     """
+    from ..geometry.mesh import Mesh
     from ..mechanics.fem import element_stress
 
     res = trimmed(res)
     mesh = check_object(res, scene, "scene", takes=("scene",))
-    if not hasattr(mesh, "triangles"):
+    if not isinstance(mesh, Mesh):
         raise ValueError("stresses need a solid mesh; a band (a curve with bending stiffness) has no triangles")
     r = row_index(res, row)
     if displacement is None:

@@ -17,7 +17,7 @@ import jaxsqueeze as jsq
 import physics
 from jaxsqueeze.geometry import curves
 from jaxsqueeze.io import cli, scenefile
-from jaxsqueeze.post import cones, plots
+from jaxsqueeze.post import cones, plots, views
 from jaxsqueeze.mechanics.band import Band
 from jaxsqueeze.simulation.scene import compliance_of, nearest_boundary_node
 
@@ -166,6 +166,11 @@ def test_heart_breaks_leaf_stabilizes(runs):
 def test_cone_rotation_plot(runs):
     fig = plots.plot_cone_rotation(*reversed(runs["heart"]))
     assert len(fig.axes) == 3
+    # a band has no triangles: no stresses, said plainly
+    scene, res = runs["heart"]
+    for call in (lambda: views.row_stress(res, scene), lambda: plots.plot_deformed(res, scene, stress="von_mises")):
+        with pytest.raises(ValueError, match="solid mesh"):
+            call()
 
 
 # ----------------------------------------------------------------------------- CLI
@@ -189,6 +194,8 @@ def test_cli_runs_band_scene(runs, name, tmp_path):
         points, _ = reader.read_points_cells()
         np.testing.assert_allclose(points[:, :2], scene.mesh.points + scene.mesh.offset)
         assert reader.num_steps == s["rows"]
+        assert not reader.read_data(0)[2]                                    # no stress cells on a band
+    assert "stress" not in s
 
 
 BAND_SCENE = """\
