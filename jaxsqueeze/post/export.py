@@ -30,7 +30,9 @@ material; the CLI passes it), one value per triangle (the plane stress of linear
 constant in each, :func:`jaxsqueeze.views.row_stress`):
 
 =========================  =======  ============================================================
-``stress_xx``, ``stress_yy``, ``stress_xy``  (t,)  plane stress components σ_xx, σ_yy, τ_xy [Pa]
+``stress_xx``              (t,)     plane stress σ_xx [Pa]
+``stress_yy``              (t,)     plane stress σ_yy [Pa]
+``stress_xy``              (t,)     plane shear stress τ_xy [Pa]
 ``von_mises``              (t,)     von Mises equivalent stress [Pa]
 =========================  =======  ============================================================
 
