@@ -20,8 +20,9 @@ examples:
   python -m jaxsqueeze --help
 
 outputs (in DIR):
-  summary.json        status, depths, events, contact regions, total forces, timings
+  summary.json        status, depths, events, contact regions, total forces, largest stress, timings
   deformed.png        deformed object, fingertips, stick (blue) / slip (red) nodes (Fig. 4)
+  stress.png          the deformed object coloured by von Mises stress
   force_profile.png   force density and direction along each contact (Fig. 5)
   sliding_profile.png polar angle of every contact node against depth (Fig. 6)
   events.png          timeline of the contact events A-D

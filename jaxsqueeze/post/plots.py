@@ -237,7 +237,8 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
     else:
         ax.autoscale_view()
     status = res.outcome.name if last else "in progress"
-    ax.set_title(title or f"Deformed object at {_title_state(res, r)} — {status}")
+    what = "Deformed object" if stress is None else STRESS_NAMES[stress][0]
+    ax.set_title(title or f"{what} at {_title_state(res, r)} — {status}")
     ax.grid(True, lw=0.3, alpha=0.5)
     return fig
 
@@ -437,8 +438,9 @@ def _cmap(k):
 
 
 def save_all(res, scene, outdir) -> dict:
-    """Write deformed.png, force_profile.png, sliding_profile.png and events.png to ``outdir``
-    (for a band also cones.png, :func:`plot_cone_rotation`).
+    """Write deformed.png, force_profile.png, sliding_profile.png and events.png to ``outdir``;
+    for a solid object with a finite final field also stress.png (the deformed object coloured
+    by von Mises stress), for a band cones.png (:func:`plot_cone_rotation`).
 
     Returns {name: path}.
     """
@@ -448,6 +450,9 @@ def save_all(res, scene, outdir) -> dict:
     mesh = scene.mesh
     figs = dict(deformed=plot_deformed(res, scene), force_profile=plot_force_profile(res, mesh=mesh),
                 sliding_profile=plot_sliding_profile(res), events=plot_events(res))
+    u = res.displacement
+    if not _is_band(mesh) and u is not None and np.all(np.isfinite(np.asarray(u))):
+        figs["stress"] = plot_deformed(res, scene, stress="von_mises")
     if _is_band(mesh) and scene.friction_model == "coulomb":
         figs["cones"] = plot_cone_rotation(res, scene)      # Fig. 3: friction-cone rotation
     out = {}

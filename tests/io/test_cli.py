@@ -55,7 +55,7 @@ max_steps = 400
 precision = "float64"
 """
 
-OUTPUTS = ["summary.json", "deformed.png", "force_profile.png", "sliding_profile.png", "events.png",
+OUTPUTS = ["summary.json", "deformed.png", "stress.png", "force_profile.png", "sliding_profile.png", "events.png",
            "squeeze.xdmf", "squeeze.h5", "final.vtu"]
 
 

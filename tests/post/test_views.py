@@ -75,6 +75,7 @@ def test_stress_energy_is_the_work_of_the_contact_forces_in_views_exports_and_pl
     for row in (-1, k):
         fig = plots.plot_deformed(res, scene, row, stress="von_mises", details=False)
         assert [a.get_ylabel() for a in fig.axes][-1] == "von Mises stress [Pa]"
+        assert fig.axes[0].get_title().startswith("von Mises stress at d = ")
     with pytest.raises(TypeError, match="stress= needs its material"):
         plots.plot_deformed(res, scene.mesh, stress="xx")
     with pytest.raises(ValueError, match="expected one of"):
@@ -175,8 +176,9 @@ def test_a_placed_finger_that_cannot_touch_is_summarised_plotted_and_exported(of
     s = views.summary(res, placed)
     assert s["status"] == "INFEASIBLE_GRIP"
     assert s["grip_distance"] == pytest.approx(float(np.linalg.norm(np.subtract(*P[np.asarray(res.grip)]))), rel=1e-12)
+    assert s["stress"]["max_von_mises"] == 0.0                # nothing touched: no deformation, no stress
     written = plots.save_all(res, placed, tmp_path / "plots")
-    assert len(written) == 4 and all(os.path.getsize(p) > 0 for p in written.values())
+    assert len(written) == 5 and all(os.path.getsize(p) > 0 for p in written.values())
     # its depths in mm, not "nan %" of a grip distance it never had; empty panels say why
     title = plots.plot_deformed(res, placed.mesh).axes[0].get_title()
     assert "nan" not in title and title.startswith("Deformed object at d = 0.00 mm")

@@ -195,7 +195,7 @@ def test_cli_runs_band_scene(runs, name, tmp_path):
         np.testing.assert_allclose(points[:, :2], scene.mesh.points + scene.mesh.offset)
         assert reader.num_steps == s["rows"]
         assert not reader.read_data(0)[2]                                    # no stress cells on a band
-    assert "stress" not in s
+    assert "stress" not in s and not (out / "stress.png").exists()
 
 
 BAND_SCENE = """\
