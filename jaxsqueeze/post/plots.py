@@ -111,7 +111,7 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         if _is_band(mesh):
             raise ValueError("stress= needs a solid mesh; a band has no triangles")
         if displacement is None:
-            displacement = views.row_field(res, r, obj.operator())
+            displacement = views.scene_field(res, obj, r)
     last = r == len(np.asarray(res.depth)) - 1
     # no fingertips to draw or zoom on when a placement never found its squeeze line (NaN centres)
     placed = bool(np.all(np.isfinite(np.asarray(res.centres[r], float))))

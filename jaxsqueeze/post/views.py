@@ -471,6 +471,13 @@ def row_field(res, row: int = -1, op=None) -> np.ndarray | None:
     return None
 
 
+def scene_field(res, scene, row: int = -1) -> np.ndarray:
+    """:func:`row_field` with the scene's operator: the stored field at the final row, else the
+    row's field rebuilt through ``scene.operator()`` (built only then; cached per object)."""
+    u = row_field(res, row)
+    return row_field(res, row, scene.operator()) if u is None else u
+
+
 def row_stress(res, scene, row: int = -1, op=None, displacement=None) -> np.ndarray:
     """(t, 3) plane stress (σ_xx, σ_yy, τ_xy) of every triangle at a recorded row [Pa]
     (constant per triangle, :func:`jaxsqueeze.fem.element_stress`; von Mises:
@@ -488,11 +495,10 @@ def row_stress(res, scene, row: int = -1, op=None, displacement=None) -> np.ndar
     mesh = check_object(res, scene, "scene", takes=("scene",))
     if not isinstance(mesh, Mesh):
         raise ValueError("stresses need a solid mesh; a band (a curve with bending stiffness) has no triangles")
-    r = row_index(res, row)
     if displacement is None:
-        displacement = row_field(res, r, op)
-    if displacement is None:                  # not stored at this row: rebuilt through the operator
-        displacement = row_field(res, r, scene.operator())
+        displacement = row_field(res, row, op)
+    if displacement is None:
+        displacement = scene_field(res, scene, row)
     return np.asarray(element_stress(mesh, scene.material, displacement), float)
 
 
