@@ -29,6 +29,24 @@ def _faster_compiles():
 
 _faster_compiles()
 
+
+def _shared_compile_cache():
+    """One persistent compilation cache for the whole run: the xdist workers, and the CLI,
+    notebook and batch processes the tests start, load a program another test compiled instead
+    of compiling it again (a module's programs are freed when it ends). A fresh folder per run,
+    made by the first process and passed on through the environment, set before JAX is
+    imported and never changed (turning a used cache off or elsewhere is what aborted XLA)."""
+    import tempfile
+    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return None
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxsqueeze-test-cache-")
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+    return os.environ["JAX_COMPILATION_CACHE_DIR"]
+
+
+_MADE_CACHE = _shared_compile_cache()       # the folder, in the process that made it (removed at its end)
+SHARED_CACHE = os.environ["JAX_COMPILATION_CACHE_DIR"]
+
 import jax  # noqa: E402
 
 # Tests run in float64 (DESIGN 4: never flip config at import in the library; tests choose).
@@ -37,12 +55,18 @@ jax.config.update("jax_enable_x64", True)
 import pytest  # noqa: E402
 
 
+def pytest_sessionfinish(session):
+    if _MADE_CACHE and not hasattr(session.config, "workerinput"):
+        import shutil
+        shutil.rmtree(_MADE_CACHE, ignore_errors=True)
+
+
 @pytest.fixture(autouse=True)
-def _persistent_cache_stays_off():
-    """No test may turn JAX's persistent compilation cache on in this process: once used, JAX
-    cannot turn it off reliably, and XLA aborted the whole suite writing a later program."""
+def _persistent_cache_stays_put():
+    """No test may move or turn off the run's persistent compilation cache in this process: once
+    used, JAX cannot change it reliably, and XLA aborted the whole suite writing a later program."""
     yield
-    assert not jax.config.jax_compilation_cache_dir, "a test turned the persistent compilation cache on"
+    assert jax.config.jax_compilation_cache_dir == SHARED_CACHE, "a test moved the persistent compilation cache"
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -34,8 +34,16 @@ print(json.dumps(dict(path=path, x64=bool(jax.config.jax_enable_x64), status=res
 """
 
 
+def _fresh_env():
+    """This environment for a fresh process, without the test run's shared compilation cache
+    (conftest.py): the child starts with no cache, as a user's process does."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")}
+    return dict(env, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""), JAX_PLATFORMS="cpu")
+
+
 def _child(cache):
-    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""), JAX_PLATFORMS="cpu")
+    env = _fresh_env()
     out = subprocess.run([sys.executable, "-c", CHILD, str(cache)], capture_output=True, text=True, env=env,
                          timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
@@ -79,10 +87,11 @@ def test_default_path_and_idempotence(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert compile_cache.default_path() == str(tmp_path / "xdg" / "jaxsqueeze" / "jax")
     # enabling: only the cache options change, and a second call is a no-op. In a child process:
-    # once JAX has used a persistent cache in a process, turning it off again is not reliable
-    # (JAX keeps the cache "used" with no folder, and XLA aborted writing a later program: the
-    # suite's CI crash), so this test process never turns it on.
-    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""), JAX_PLATFORMS="cpu")
+    # once JAX has used a persistent cache in a process, moving or turning it off again is not
+    # reliable (JAX keeps the cache "used" with no folder, and XLA aborted writing a later
+    # program: the suite's CI crash), so this test process keeps the run's cache (conftest.py).
+    before = compile_cache.enabled()
+    env = _fresh_env()
     out = subprocess.run([sys.executable, "-c", IDEMPOTENCE, str(tmp_path / "here")], capture_output=True,
                          text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr[-3000:]
@@ -90,7 +99,7 @@ def test_default_path_and_idempotence(tmp_path, monkeypatch):
     assert r["p"] == r["again"] == r["enabled"] == str(tmp_path / "here") and r["isdir"]
     assert r["x64_kept"]
     assert r["min_time"] == compile_cache.MIN_COMPILE_TIME_S and r["min_size"] == -1
-    assert compile_cache.enabled() is None          # this process is untouched
+    assert compile_cache.enabled() == before          # this process is untouched
 
 
 @pytest.mark.parametrize("args,kw,error,match", [
@@ -104,10 +113,21 @@ def test_default_path_and_idempotence(tmp_path, monkeypatch):
 def test_enable_refuses_what_is_not_a_folder_or_a_time(tmp_path, args, kw, error, match):
     """A file where the folder belongs, an int, '' (it used the working directory) or a negative,
     NaN or string minimum time: an error naming the argument, before any JAX option changes
-    (so this test process, which never turns the cache on, stays untouched)."""
+    (so this test process keeps the run's cache, conftest.py)."""
     from jaxsqueeze import compile_cache
+    before = compile_cache.enabled()
     (tmp_path / "FILE").write_text("")
     args = tuple(str(tmp_path / a) if a in ("FILE", "DIR") else a for a in args)
     with pytest.raises(error, match=match):
         compile_cache.enable(*args, **kw)
-    assert compile_cache.enabled() is None
+    assert compile_cache.enabled() == before
+
+
+def test_the_test_run_shares_one_cache_folder():
+    """README, Development: the run's processes share one persistent compilation cache, a
+    folder made for the run: this process uses the folder its environment passes on to the
+    processes it starts."""
+    import jax
+    from jaxsqueeze import compile_cache
+    path = os.environ["JAX_COMPILATION_CACHE_DIR"]
+    assert compile_cache.enabled() == jax.config.jax_compilation_cache_dir == path and os.path.isdir(path)
