@@ -92,9 +92,13 @@ def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
 
 def von_mises(stress) -> jax.Array:
     """Von Mises equivalent stress [Pa] of plane stresses (..., 3) = (σ_xx, σ_yy, τ_xy), σ_zz = 0:
-    √(σ_xx² − σ_xx σ_yy + σ_yy² + 3 τ_xy²)."""
+    √(σ_xx² − σ_xx σ_yy + σ_yy² + 3 τ_xy²), with derivative 0 (not NaN) where the stress is 0,
+    as for the other norms a search may differentiate (an unloaded triangle, a grip that never
+    started)."""
     sxx, syy, txy = stress[..., 0], stress[..., 1], stress[..., 2]
-    return jnp.sqrt(sxx**2 - sxx * syy + syy**2 + 3 * txy**2)
+    q = sxx**2 - sxx * syy + syy**2 + 3 * txy**2
+    pos = q > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, q, 1.0)), 0.0)
 
 
 #: element stiffnesses (t, 6, 6) from the triangles' corners (t, 3, 2), lifted from the kernel

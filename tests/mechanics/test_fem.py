@@ -243,6 +243,12 @@ def test_element_stress_is_hookes_law_and_its_energy_the_stiffness_energy(name):
     assert np.abs(sig - hooke).max() <= 1e-9 * np.abs(hooke).max()
     assert np.abs(np.asarray(fem.element_stress(mesh, MAT, rigid))).max() <= 1e-9 * np.abs(hooke).max()
     np.testing.assert_allclose(fem.von_mises(np.array([[-3.0, 0, 0], [0, 2.0, 0], [0, 0, 1.5]])), [3, 2, 1.5 * 3**0.5])
+    # its derivative: (2σ_xx − σ_yy, 2σ_yy − σ_xx, 6τ_xy) / 2σ_vm where loaded, 0 (not NaN) unloaded
+    s0 = np.array([[2.0, -1.0, 0.5], [0.0, 0.0, 0.0]])
+    g = np.asarray(jax.grad(lambda s: fem.von_mises(s).sum())(jnp.asarray(s0)))
+    vm = float(fem.von_mises(s0[0]))
+    np.testing.assert_allclose(g[0], [5.0 / (2 * vm), -4.0 / (2 * vm), 3.0 / (2 * vm)], rtol=1e-14)
+    np.testing.assert_array_equal(g[1], 0.0)
     u = np.random.default_rng(4).normal(size=(mesh.n, 2)) * 1e-4
     want = 0.5 * u.ravel() @ dense_K(mesh) @ u.ravel()
     assert abs(stress_energy(mesh, MAT, fem.element_stress(mesh, MAT, u)) - want) <= 1e-12 * want
