@@ -119,20 +119,39 @@ def test_run_matches_python(run_dir):
 def test_a_float32_scene_file_runs_in_float32_from_the_command_line(run_dir, tmp_path):
     """README: ``precision = "float32"`` in [accuracy], and the CLI sets JAX's precision from it
     (a fresh process, as a user runs it): the float64 run's squeeze to float32's accuracy,
-    with the same events, and not the float64 numbers to the last digits."""
+    with the same events, and not the float64 numbers to the last digits. The process keeps
+    its compiled squeeze in the persistent cache, on by default in the CLI
+    (``$JAXSQUEEZE_CACHE``, here without the test run's shared cache)."""
     path = tmp_path / "scene32.toml"
     path.write_text(SCENE.replace('precision = "float64"', 'precision = "float32"'))
     out = tmp_path / "out32"
-    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    env = {k: v for k, v in os.environ.items() if k not in ("JAX_ENABLE_X64", "JAXSQUEEZE_NO_CACHE",
+                                                            "JAX_COMPILATION_CACHE_DIR")}
+    env["JAXSQUEEZE_CACHE"] = str(tmp_path / "cache")
     r = subprocess.run([sys.executable, "-m", "jaxsqueeze", "run", str(path), "--out", str(out), "--no-plots", "-q"],
                        capture_output=True, text=True, timeout=300, env=env)
     assert r.returncode == 0, r.stderr[-3000:]
+    assert any((tmp_path / "cache").iterdir()), "the CLI wrote nothing to its compilation cache"
     s32, s64 = (json.loads((o / "summary.json").read_text()) for o in (out, run_dir[1]))
     assert (s32["precision"], s64["precision"]) == ("float32", "float64")
     assert s32["status"] == s64["status"] == "SUCCESS" and s32["event_sequence"] == s64["event_sequence"]
     F32, F64 = (np.array([s["total_force"][f"finger{f}"] for f in (0, 1)]) for s in (s32, s64))
     scale = np.abs(F64).max()
     assert 1e-12 * scale < np.abs(F32 - F64).max() < 1e-4 * scale
+
+
+def test_no_cache_keeps_the_command_line_off_the_compilation_cache(run_dir, tmp_path, monkeypatch):
+    """``--no-cache`` (and ``JAXSQUEEZE_NO_CACHE``, which the tests set): the CLI does not turn
+    the persistent compilation cache on; without either it does, once per command."""
+    from jaxsqueeze import compile_cache
+    calls = []
+    monkeypatch.setattr(compile_cache, "enable", lambda *a, **kw: calls.append(a))
+    monkeypatch.delenv("JAXSQUEEZE_NO_CACHE")
+    args = ["run", str(run_dir[0]), "--out", str(tmp_path / "o"), "--no-plots", "-q"]
+    assert cli.main(args + ["--no-cache"]) == 0 and calls == []
+    assert cli.main(args) == 0 and calls == [()]
+    monkeypatch.setenv("JAXSQUEEZE_NO_CACHE", "1")
+    assert cli.main(args) == 0 and calls == [()]
 
 
 def test_xdmf_reads_back(run_dir):
