@@ -35,12 +35,18 @@ def _shared_compile_cache():
     notebook and batch processes the tests start, load a program another test compiled instead
     of compiling it again (a module's programs are freed when it ends). A fresh folder per run,
     made by the first process and passed on through the environment, set before JAX is
-    imported and never changed (turning a used cache off or elsewhere is what aborted XLA)."""
+    imported and never changed (turning a used cache off or elsewhere is what aborted XLA).
+    A size bound turns on JAX's file lock around every read and write of the folder (with the
+    ``filelock`` package of the test extras): JAX writes an entry in place, and a worker reading
+    it half-written would warn, which the tests that turn warnings into errors would fail on."""
+    import importlib.util
     import tempfile
     if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
         return None
     os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxsqueeze-test-cache-")
     os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+    if importlib.util.find_spec("filelock") is not None:
+        os.environ["JAX_COMPILATION_CACHE_MAX_SIZE"] = str(8 << 30)
     return os.environ["JAX_COMPILATION_CACHE_DIR"]
 
 

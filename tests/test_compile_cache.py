@@ -38,7 +38,8 @@ def _fresh_env():
     """This environment for a fresh process, without the test run's shared compilation cache
     (conftest.py): the child starts with no cache, as a user's process does."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")}
+           if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
+                        "JAX_COMPILATION_CACHE_MAX_SIZE")}
     return dict(env, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""), JAX_PLATFORMS="cpu")
 
 
@@ -126,8 +127,11 @@ def test_enable_refuses_what_is_not_a_folder_or_a_time(tmp_path, args, kw, error
 def test_the_test_run_shares_one_cache_folder():
     """README, Development: the run's processes share one persistent compilation cache, a
     folder made for the run: this process uses the folder its environment passes on to the
-    processes it starts."""
+    processes it starts; with a size bound, so that JAX locks the folder around every read and
+    write (no worker reads an entry another is still writing)."""
     import jax
     from jaxsqueeze import compile_cache
     path = os.environ["JAX_COMPILATION_CACHE_DIR"]
     assert compile_cache.enabled() == jax.config.jax_compilation_cache_dir == path and os.path.isdir(path)
+    pytest.importorskip("filelock")
+    assert jax.config.jax_compilation_cache_max_size == 8 << 30

@@ -126,7 +126,7 @@ def test_a_float32_scene_file_runs_in_float32_from_the_command_line(run_dir, tmp
     path.write_text(SCENE.replace('precision = "float64"', 'precision = "float32"'))
     out = tmp_path / "out32"
     env = {k: v for k, v in os.environ.items() if k not in ("JAX_ENABLE_X64", "JAXSQUEEZE_NO_CACHE",
-                                                            "JAX_COMPILATION_CACHE_DIR")}
+                                                            "JAX_COMPILATION_CACHE_DIR", "JAX_COMPILATION_CACHE_MAX_SIZE")}
     env["JAXSQUEEZE_CACHE"] = str(tmp_path / "cache")
     r = subprocess.run([sys.executable, "-m", "jaxsqueeze", "run", str(path), "--out", str(out), "--no-plots", "-q"],
                        capture_output=True, text=True, timeout=300, env=env)
