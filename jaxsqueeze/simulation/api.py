@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
 
 import jax
@@ -91,6 +92,12 @@ def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:
     if validated:
         return g
     return dataclasses.replace(g, invalid=invalid_index(g, scene, op))
+
+
+#: :func:`grasp_of` of a traced scene as one program: under an eager ``jax.jacfwd`` or
+#: ``jax.vmap`` its ~70 small operations (the conversions and the traced validation) would
+#: each be compiled on its own the first time (~3 s on 2 cores)
+_traced_grasp = jax.jit(functools.partial(grasp_of, validated=False))
 
 
 def invalid_index(grasp: Grasp, scene: Scene, op: Compliance) -> jax.Array:
@@ -456,7 +463,7 @@ def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
             warnings.warn(line, stacklevel=3)
         if scene.placement is None:
             check_grip(scene, op)
-    grasp = grasp_of(scene, op, validated=concrete)
+    grasp = grasp_of(scene, op, validated=True) if concrete else _traced_grasp(scene, op)
     if concrete:
         validate.raise_if_invalid(validate_values(grasp, scene, op))
     return op, grasp

@@ -249,7 +249,12 @@ def test_jacfwd_in_placement_matches_central_differences(ellipse):
     """d(grip force, adversary work)/d(s_0, s_1, angle, s_push) by jax.jacfwd against central
     differences (step 1e-6 m or rad; agree to rtol 1e-6 away from event switches): through the
     squeeze and through the push phase, whose pushed point and normal move continuously with
-    s_push (docs/planning.md, "The adversary push")."""
+    s_push (docs/planning.md, "The adversary push").
+
+    The eager ``jacfwd`` compiles ~30 programs when it runs first in a process (the squeeze's
+    derivative, the scene's conversions and validation, each quality, the operator's element
+    kernel; the slicing and stacking of x and JAX's basis): not each small operation of the
+    library's code on its own, which were ~100 more (~5 s on 2 cores)."""
     P = float(ellipse.curve().perimeter)
     x0 = np.array([0.01, P / 2 + 0.004, 0.05, P / 4])
 
@@ -257,7 +262,14 @@ def test_jacfwd_in_placement_matches_central_differences(ellipse):
         res = _pushed(ellipse, x)
         return jnp.stack([Q.grip_force(res), Q.adversary_work(res)]), res.status
 
-    J, status = jax.jacfwd(f, has_aux=True)(jnp.asarray(x0))
+    compiled = []
+    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        J, status = jax.jacfwd(f, has_aux=True)(jnp.asarray(x0))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert len(compiled) <= 40, len(compiled)
     assert int(status) == jsq.Status.SUCCESS
     for k in range(4):
         h = np.eye(4)[k] * 1e-6
