@@ -187,8 +187,10 @@ def in_kernel() -> bool:
 
 def top_level_trace() -> bool:
     """True while a :func:`jit` function is traced for a top-level compile, i.e. with
-    :func:`options` (an eager squeeze, the planner's programs, :func:`~jaxsqueeze.batch.split_vmap`):
-    where :func:`one_kernel` regions may go when :func:`can_fuse`."""
+    :func:`options` (an eager squeeze, the planner's programs, :func:`~jaxsqueeze.batch.split_vmap`,
+    the core of an eager ``jax.vmap``/``jax.jacfwd`` of a squeeze): where :func:`one_kernel`
+    regions may go when :func:`can_fuse` (a squeeze decides before its core is traced,
+    :func:`jaxsqueeze.simulation.api.config_of`)."""
     return getattr(_TOP, "depth", 0) > 0
 
 
