@@ -442,25 +442,23 @@ def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None, ord
     found without squeezing (the approach and the cone test only), best margin first; each
     pair once (s_0 < s_1), or in both orders with ``ordered`` (for fingers or a quality that
     tell the roles apart, :func:`roles_symmetric`)."""
-    from ..simulation import api, engine
+    from ..simulation import api
 
     s = grid(scene, spacing)
     i, j = _pairs(len(s), ordered)
     X = np.stack([s[i], s[j], np.full(len(i), _check_angle(angle))], 1)
     op = _check(scene, X, op)
-    sc = _placed(scene, X[0])
-    cfg = api.config_of(sc)
-
-    @jax.jit
-    def margins(X):
-        def one(x):
-            g = api.grasp_of(_placed(scene, x), op)
-            return engine.make_model(op, g, cfg).margin
-        return jax.vmap(one)(X)
-
-    m = np.asarray(margins(jnp.asarray(X)))
+    m = np.asarray(_margins(scene, op, api.config_of(_placed(scene, X[0])), jnp.asarray(X)))
     keep = np.flatnonzero(m >= 0)
     return X[keep[np.argsort(-m[keep])]]
+
+
+@compiler.jit(static_argnums=(2,))
+def _margins(scene: Scene, op, cfg, X):
+    """(k,) cone margins of the first contacts of the placements X (k, 3) of ``scene``
+    (no squeeze). Module level: a second search on the same scene and grid compiles nothing."""
+    from ..simulation import api, engine
+    return jax.vmap(lambda x: engine.make_model(op, api.grasp_of(_placed(scene, x), op), cfg).margin)(X)
 
 
 class Step(NamedTuple):

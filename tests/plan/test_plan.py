@@ -376,6 +376,15 @@ def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
     cands = plan.candidate_pairs(ellipse, spacing=P / 12)
     assert len(cands) > 0
     assert np.all(plan.evaluate(ellipse, cands[:2], progress=False).margin >= 0)
+    # the cone test's program is compiled once per scene shape and grid, not once per call
+    compiled = []
+    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        fewer = plan.candidate_pairs(ellipse.replace(friction=0.3), spacing=P / 12)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert compiled == [] and 0 < len(fewer) < len(cands)
     # Settings(fused=True): the planner's own programs run each squeeze loop as one kernel
     fused = ellipse.replace(settings=dataclasses.replace(ellipse.settings, fused=True))
     f = plan.evaluate(fused, X, batch="vmap", chunk=3, progress=False)
