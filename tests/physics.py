@@ -1,7 +1,9 @@
 """Shared test helpers: exactly symmetric meshes and the invariants every squeeze state must hold."""
+import contextlib
 import os
 from typing import NamedTuple
 
+import jax
 import numpy as np
 import triangle
 
@@ -203,3 +205,15 @@ def replay_events(res, frictionless=False):
                 held[n] = "stick" if kind == "D" or (kind == "A" and not frictionless) else "slide"
         got = {int(nodes[i]): "stick" if modes[r, i] == 1 else "slide" for i in np.nonzero(modes[r] > 0)[0]}
         assert held == got, f"row {r} (d = {depth[r]:.6g} m): log {held}, rows {got}"
+
+
+@contextlib.contextmanager
+def compiles():
+    """The XLA compiles of the ``with`` block, one event name each (``jax.monitoring``)."""
+    seen = []
+    listener = lambda name, secs, **kw: seen.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield seen
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)

@@ -17,6 +17,7 @@ import jaxsqueeze as jsq
 from jaxsqueeze.geometry import shapes
 from jaxsqueeze.mechanics import bordered, fem
 from jaxsqueeze.mechanics.material import Material
+from physics import compiles
 
 MAT = Material(E=2.5e6, nu=0.35, thickness=0.01)
 METHODS = ("sparse", "dense", "spectral")
@@ -668,14 +669,9 @@ def test_operator_builds_compile_only_the_element_kernel():
     (about a dozen, 0.3 s, on every first squeeze of an object of a new size)."""
     from jaxsqueeze.geometry import curves
     from jaxsqueeze.mechanics.band import Band, band_compliance
-    compiled = []
-    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with compiles() as compiled:
         op = fem.compliance(shapes.polygon(L_SHAPE, max_edge=0.0137), MAT, "sparse")   # sizes no other test builds
         band = band_compliance(Band.from_function(curves.circle(0.03), 37), 1e9)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     assert len(compiled) <= 1
     for o in (op, band):
         assert all(isinstance(a, jax.Array) for a in (o.points, o.normals, o.G, o.N, o.length, o.stiffness, o.nodes))

@@ -10,7 +10,7 @@ import pytest
 import jaxsqueeze as jsq
 from jaxsqueeze import plan
 from jaxsqueeze.plan import quality as Q
-from physics import check_states, nearest, sliding_against_friction, symmetric_square
+from physics import check_states, compiles, nearest, sliding_against_friction, symmetric_square
 
 MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
 
@@ -262,13 +262,8 @@ def test_jacfwd_in_placement_matches_central_differences(ellipse):
         res = _pushed(ellipse, x)
         return jnp.stack([Q.grip_force(res), Q.adversary_work(res)]), res.status
 
-    compiled = []
-    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with compiles() as compiled:
         J, status = jax.jacfwd(f, has_aux=True)(jnp.asarray(x0))
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     assert len(compiled) <= 40, len(compiled)
     assert int(status) == jsq.Status.SUCCESS
     for k in range(4):
@@ -377,13 +372,8 @@ def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
     assert len(cands) > 0
     assert np.all(plan.evaluate(ellipse, cands[:2], progress=False).margin >= 0)
     # the cone test's program is compiled once per scene shape and grid, not once per call
-    compiled = []
-    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with compiles() as compiled:
         fewer = plan.candidate_pairs(ellipse.replace(friction=0.3), spacing=P / 12)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     assert compiled == [] and 0 < len(fewer) < len(cands)
     # Settings(fused=True): the planner's own programs run each squeeze loop as one kernel
     fused = ellipse.replace(settings=dataclasses.replace(ellipse.settings, fused=True))

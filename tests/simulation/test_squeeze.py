@@ -8,7 +8,7 @@ import pytest
 
 import jaxsqueeze as jsq
 from jaxsqueeze.simulation import api as grasp_mod
-from physics import check_states, nearest, symmetric_square
+from physics import check_states, compiles, nearest, symmetric_square
 
 MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
 
@@ -333,13 +333,8 @@ def test_a_second_eager_squeeze_compiles_nothing(slanted):
     """Nothing on the eager path (validation, the compiled core, the full displacement field,
     trimming) compiles again for new numbers: no per-call host callback or tiny programs."""
     jsq.squeeze(slanted)
-    compiled = []
-    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with compiles() as compiled:
         res = jsq.squeeze(slanted.replace(friction=0.25, depth=0.011))
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     assert res.displacement is not None and res.displacement.shape == slanted.mesh.points.shape
     assert compiled == []
 
@@ -463,13 +458,8 @@ def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monke
         np.testing.assert_allclose(over.forces, res.forces[:n], rtol=0, atol=1e-12 * float(np.abs(res.forces).max()))
         check_states(over, slanted.mesh, slanted.friction)
         assert over.events.rows()[-1][0] > float(over.final_depth)
-    compiled = []
-    listener = lambda name, secs, **kw: compiled.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with compiles() as compiled:
         again = jsq.squeeze(slanted.replace(friction=0.25))
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     assert again.outcome == jsq.Status.SUCCESS and compiled == []
 
 
