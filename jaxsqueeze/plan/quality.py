@@ -64,9 +64,8 @@ def per_result(fn):
     @functools.wraps(fn)
     def wrapped(res, *args, **kwargs):
         _check_result(res, fn.__name__)
-        if jnp.ndim(res.depth) == 2:
-            return jax.vmap(lambda r: fn(r, *args, **kwargs))(res)
-        return fn(res, *args, **kwargs) if args or kwargs else whole(res)
+        one = (lambda r: fn(r, *args, **kwargs)) if args or kwargs else whole
+        return jax.vmap(one)(res) if jnp.ndim(res.depth) == 2 else one(res)
     return wrapped
 
 
