@@ -206,3 +206,23 @@ def test_one_kernel_differentiates_through_constants_and_state():
     np.testing.assert_allclose(t, [2.0, 0.0, 2.0])
     _, t = jax.jvp(lambda y: f(3.0 * jnp.ones(3), y), (x,), (jnp.ones(3),))
     np.testing.assert_allclose(t, [3.0, 1.0, 3.0])
+
+
+def test_the_installed_jax_is_the_range_pyproject_asks_for():
+    """README, Development: the compile options and batching rules follow JAX 0.10, so
+    ``pyproject.toml`` asks for ``jax>=0.10.2,<0.11``; the suite must run on a JAX in that
+    range (and on its own jaxlib), or what it passes says nothing about what users install."""
+    import importlib.metadata as md
+    try:
+        import tomllib
+    except ImportError:         # Python 3.10
+        import tomli as tomllib
+
+    from packaging.requirements import Requirement
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    with open(os.path.join(root, "pyproject.toml"), "rb") as f:
+        deps = [Requirement(d) for d in tomllib.load(f)["project"]["dependencies"]]
+    (jax_req,) = [r for r in deps if r.name == "jax"]
+    assert set(str(jax_req.specifier).split(",")) == {">=0.10.2", "<0.11"}      # what the README says
+    assert jax_req.specifier.contains(md.version("jax")) and jax.__version__ == md.version("jax")
+    assert md.version("jaxlib").split(".")[:2] == md.version("jax").split(".")[:2]
