@@ -3,6 +3,7 @@ import os
 import re
 import warnings
 
+import jax
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -18,7 +19,8 @@ def test_readme_examples_run(tmp_path, monkeypatch):
     assert len(blocks) >= 2
     monkeypatch.chdir(tmp_path)
     ns = {}
-    with warnings.catch_warnings(record=True) as caught:
+    # README, "Your JAX settings": the examples run as written with rank promotion raised
+    with warnings.catch_warnings(record=True) as caught, jax.numpy_rank_promotion("raise"):
         warnings.simplefilter("always")
         for block in blocks:
             exec(compile(block, "README.md", "exec"), ns)          # noqa: S102  (our own README)

@@ -140,9 +140,9 @@ def stiffness(mesh: Mesh, material: Material) -> jsparse.BCOO:
 def null_space(points) -> jax.Array:
     """Normalized null-space basis (2n, 3) of K: w_x, w_y, w_r about the node centroid (Section II)."""
     pts = jnp.asarray(points)
-    pts = pts - pts.mean(axis=0)
+    pts = pts - pts.mean(axis=0, keepdims=True)
     w = rigid_modes(pts)
-    return w / jnp.linalg.norm(w, axis=0)
+    return w / jnp.linalg.norm(w, axis=0, keepdims=True)
 
 
 def scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
@@ -261,7 +261,7 @@ def _spectral_build(pts, triangles, nu, bdofs, pins):
     K = _dense_K(pts, triangles, nu)
     lam, V = jnp.linalg.eigh(K)
     lam, V = lam[3:], V[:, 3:]          # the three smallest are the rigid modes
-    return (V / lam) @ V[bdofs].T
+    return (V / lam[None, :]) @ V[bdofs].T
 
 
 def _sparse_build(mesh: Mesh, nu, pts, bdofs, pins, chunk: int = 128):

@@ -340,7 +340,7 @@ def _block_form(sl: Slots, sel):
     f_k = Σ_j P[k, :, j, :] p_j, gathered straight from the inverse (out-of-range slots
     clipped: callers mask them)."""
     S = (sl.Minv.shape[0] - 3) // 2
-    dofs = (2 * jnp.clip(sel, 0, S - 1)[:, None] + jnp.arange(2)).reshape(-1)
+    dofs = (2 * jnp.clip(sel, 0, S - 1)[:, None] + jnp.arange(2)[None, :]).reshape(-1)
     Q = sel.shape[0]
     return sl.Minv[dofs[:, None], dofs[None, :]].reshape(Q, 2, Q, 2)
 

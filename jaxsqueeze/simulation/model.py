@@ -147,7 +147,7 @@ def first_touch(x, o, v, r, present=True):
     touches one of the points x (m, 2): (t, k) with the centre at o + t v at touch and k the
     touched point; t = +inf when the circle's path misses every point. This is event A's gap
     function solved along the approach (the object is rigid before first touch)."""
-    w = x - o
+    w = x - o[None, :]
     b = w @ v
     disc = b * b - jnp.sum(w * w, axis=1) + r * r
     t = jnp.where(disc > 0, b - jnp.sqrt(jnp.where(disc > 0, disc, 1.0)), jnp.inf)
@@ -158,7 +158,7 @@ def first_touch(x, o, v, r, present=True):
 
 def gap_to_fingers(model: Model, x, d):
     """(m, F) gap of points x (m, 2) to each fingertip circle at λ = d (+inf for absent fingers)."""
-    g = jnp.linalg.norm(x[:, None, :] - model.centres(d)[None], axis=-1) - model.r
+    g = jnp.linalg.norm(x[:, None, :] - model.centres(d)[None], axis=-1) - model.r[None, :]
     return jnp.where(model.present, g, jnp.inf)
 
 
@@ -289,7 +289,7 @@ def push_model(model: Model, grasp: Grasp, st) -> Model:
     t = jnp.where(touches, t, 0.0)
     c3 = o + t * v
     held = model.centres(st.d)[:2]
-    clear = jnp.linalg.norm(held - c3, axis=1) > model.r[:2] + r3
+    clear = jnp.linalg.norm(held - c3[None, :], axis=1) > model.r[:2] + r3
     touches = touches & jnp.all(clear) & ~boundary.inside(x, op.loops, c3[None])[0]
     base = model.centres(st.d).at[2].set(c3)
     dirn = jnp.zeros_like(model.dirn).at[2].set(v)

@@ -253,7 +253,7 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     return SqueezeResult(
         status=st.status, depth=pad(depth) * L, modes=pad(mode), finger=pad(finger), theta=pad(theta),
         forces=pad(F) * Fs, boundary_displacement=pad(u) * L, centres=pad(C) * L, alpha=pad(alpha),
-        rigid=pad(g) * gs, events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
+        rigid=pad(g) * gs[None, :], events=EventLog(ev_d * L, ev_n, ev_k, ev_f), displacement=None,
         g=st.g * gs, count=k, n_events=n_ev, nodes=op.nodes,
         grip=op.nodes[st.grip], radius=grasp.radius,
         stats=st.stats, invalid=st.invalid, push=pad(push) * L, margin=st.margin,
