@@ -121,14 +121,11 @@ def field_displacement(op: Compliance, f_hat: jax.Array, g: jax.Array) -> jax.Ar
     return _field(op.field, f_hat, g)
 
 
-@jax.custom_jvp
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _field_linear(fmap, f_hat):
-    shape = jax.ShapeDtypeStruct(f_hat.shape[:-1] + (2 * fmap.n,), f_hat.dtype)
-    return jax.pure_callback(lambda f: _field_solve_host(fmap, f).astype(f_hat.dtype), shape, f_hat,
-                             vmap_method="expand_dims")
-
-
-_field_linear = jax.custom_jvp(_field_linear.fun, nondiff_argnums=(0,))
+    dt = f_hat.dtype        # (the callback, kept in the program, must not hold the tracer f_hat)
+    shape = jax.ShapeDtypeStruct(f_hat.shape[:-1] + (2 * fmap.n,), dt)
+    return jax.pure_callback(lambda f: _field_solve_host(fmap, f).astype(dt), shape, f_hat, vmap_method="expand_dims")
 
 
 @_field_linear.defjvp

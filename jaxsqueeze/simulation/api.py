@@ -201,9 +201,10 @@ def _jvp_of(fn):
     rule: ``lax.map`` cannot carry ``float0``, so a placeholder passes through it)."""
     def rule(primals, tangents):
         moving = [not isinstance(t, SymbolicZero) for t in tangents]
+        n = len(primals)     # (jvp keeps no tracer of this trace: its batching rule outlives it)
 
         def jvp(*xs):
-            ps, ts = xs[:len(primals)], xs[len(primals):]
+            ps, ts = xs[:n], xs[n:]
 
             def of_moving(*ys):
                 it = iter(ys)
@@ -212,7 +213,7 @@ def _jvp_of(fn):
             out, dout = jax.jvp(of_moving, tuple(p for p, m in zip(ps, moving) if m), ts)
             return out, jax.tree.map(lambda o, t: t if floating(o) else jnp.zeros((), jnp.int8), out, dout)
 
-        out, dout = _one_at_a_time(jvp, len(primals))(*primals, *(t for t, m in zip(tangents, moving) if m))
+        out, dout = _one_at_a_time(jvp, n)(*primals, *(t for t, m in zip(tangents, moving) if m))
         return out, jax.tree.map(lambda o, t: t if floating(o) else np.zeros(jnp.shape(o), jax.dtypes.float0), out, dout)
 
     return rule
