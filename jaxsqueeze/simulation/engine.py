@@ -625,7 +625,9 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # a set in which a finger's contacts all slide is the squeeze's end (SLIP_FAILURE, finish):
     # its pulls and sunk nodes are that failure, not a set to settle; let go, they made it a
     # LOST_CONTACT (a sliding point contact of a two-point grasp pulls, docs/numerics.md §2, 24)
-    going = jnp.all(held > 0) & ~(jnp.any(slid == held) if model.cfg.slip_events else False)
+    going = jnp.all(held > 0)
+    if model.cfg.slip_events:
+        going = going & ~jnp.any(slid == held)
     # a release that drops a tangential force (full stick: a fingertip that turns drags its
     # contacts until one pulls) can land a free node inside a fingertip: it joins where it is,
     # an A event at d* (as the next step's event location would find it at d*), while both
@@ -717,7 +719,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
     # (a bracket narrower than 100 eps, in d <= 1, is round-off)
     refine = (undone | unsettled) & (st.stats.refined < REFINE[1]) & (st.fault == RUNNING) \
         & (model.ev_tol >= REFINE[0] * 100 * jnp.finfo(d_star.dtype).eps) \
-        if d_star.dtype == jnp.float64 and model.cfg.friction_model != "frictionless" else False
+        if d_star.dtype == jnp.float64 and model.cfg.friction_model != "frictionless" else jnp.zeros((), bool)
     fault = jnp.where((undone | unsettled) & ~refine & (st.fault == RUNNING), Status.STALLED, st.fault).astype(jnp.int32)
     settle = unsettled & refine              # CHECK again at d*: the finer tolerance, SETTLE_ITERS more passes
     done = lambda: _with(st, fault=fault, stats=st.stats._replace(refined=st.stats.refined + refine))  # noqa: E731
