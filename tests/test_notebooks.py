@@ -15,8 +15,10 @@ NOTEBOOKS = ["01_quickstart.ipynb", "02_paper_figures.ipynb", "03_bands.ipynb", 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_notebook_runs(name, tmp_path, monkeypatch):
-    # README, "Your JAX settings": the kernel's JAX raises on implicit rank promotion
+    # README, "Your JAX settings": the kernel's JAX raises on implicit rank promotion and
+    # promotes dtypes strictly
     monkeypatch.setenv("JAX_NUMPY_RANK_PROMOTION", "raise")
+    monkeypatch.setenv("JAX_NUMPY_DTYPE_PROMOTION", "strict")
     nb = nbformat.read(os.path.join(ROOT, "notebooks", name), as_version=4)
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), "commit notebooks without outputs"
     # kernel "python3" is launched with sys.executable (jupyter_client substitutes "python"),

@@ -19,8 +19,10 @@ def test_readme_examples_run(tmp_path, monkeypatch):
     assert len(blocks) >= 2
     monkeypatch.chdir(tmp_path)
     ns = {}
-    # README, "Your JAX settings": the examples run as written with rank promotion raised
-    with warnings.catch_warnings(record=True) as caught, jax.numpy_rank_promotion("raise"):
+    # README, "Your JAX settings": the examples run as written with rank promotion raised and
+    # strict dtype promotion
+    with warnings.catch_warnings(record=True) as caught, jax.numpy_rank_promotion("raise"), \
+            jax.numpy_dtype_promotion("strict"):
         warnings.simplefilter("always")
         for block in blocks:
             exec(compile(block, "README.md", "exec"), ns)          # noqa: S102  (our own README)

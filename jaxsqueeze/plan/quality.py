@@ -71,7 +71,7 @@ def per_result(fn):
 
 def _rows(res: SqueezeResult):
     """(valid (k,), squeeze (k,), push (k,)) row masks: recorded rows, squeeze-phase rows, push rows."""
-    k = jnp.arange(jnp.shape(res.depth)[-1])
+    k = jnp.arange(jnp.shape(res.depth)[-1], dtype=jnp.asarray(res.count).dtype)
     valid = k < res.count
     squeeze = valid & (jnp.asarray(res.push) == 0)
     return valid, squeeze, valid & ~squeeze

@@ -489,11 +489,20 @@ class Search(NamedTuple):
     screened: int = 0
 
 
+def _optax_promotion():
+    """The dtype promotion rules the optimizer runs under: JAX's standard ones. optax mixes
+    integer step counts with float moments (``b1 ** count``), which a user's
+    ``jax_numpy_dtype_promotion="strict"`` refuses; the library's own code needs no
+    implicit promotion."""
+    return jax.numpy_dtype_promotion("standard")
+
+
 def unit_step(optimizer) -> np.ndarray:
     """(3,) the optimizer's first step from a unit gradient at the origin, taken as the search
     takes one: ``optimizer.update(gradient, state, params)``."""
     u = jnp.zeros(3)
-    return np.asarray(optimizer.update(jnp.ones(3), optimizer.init(u), u)[0])
+    with _optax_promotion():
+        return np.asarray(optimizer.update(jnp.ones(3), optimizer.init(u), u)[0])
 
 
 def check_search(optimizer, steps, starts, budget, init) -> None:
@@ -602,7 +611,8 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     histories, best_x, best_q = [], None, -np.inf
     for k, x0 in enumerate(init):
         u = jnp.asarray(x0 * scale)
-        state = optimizer.init(u)
+        with _optax_promotion():
+            state = optimizer.init(u)
         s, g = value_and_grad(u)
         squeezes += 1
         step = lambda u, s, g, undone=False: Step(np.asarray(u) / scale, float(s.quality),  # noqa: E731
@@ -612,7 +622,8 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
             ok = int(s.status) == Status.SUCCESS
             if ok and float(s.quality) > best_q:
                 best_q, best_x = float(s.quality), np.asarray(u) / scale
-            updates, new_state = optimizer.update(-g * mask, state, u)
+            with _optax_promotion():
+                updates, new_state = optimizer.update(-g * mask, state, u)
             updates = jnp.where(mask > 0, updates, 0.0)       # vary_angle=False: the angle stays (weight decay, noise)
             finite = np.all(np.isfinite(np.asarray(jnp.where(mask > 0, g, 0.0)))) and np.all(np.isfinite(updates))
             if ok and not finite:

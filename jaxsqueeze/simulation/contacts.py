@@ -399,7 +399,7 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d):
         rho = jnp.sqrt(jnp.mean(jnp.sum(model.op.points * model.op.points, axis=-1)))
         K = jnp.stack([-e[1] * fit[0] + e[0] * fit[1], rho * fit[2]]).reshape(2, S, 2)
         diag = jnp.diagonal(sl.Minv)[: 2 * S].reshape(S, 2).sum(1)
-        eps = NEUTRAL_REG * jnp.sum(jnp.where(v.active, diag, 0.0)) / jnp.maximum(2 * jnp.sum(v.active), 1)
+        eps = NEUTRAL_REG * jnp.sum(jnp.where(v.active, diag, 0.0)) / jnp.maximum(2 * jnp.sum(v.active, dtype=diag.dtype), 1)
 
     def solve_for(sel, mask, back, on):
         """Newton on the slots ``sel`` (Q,) whose ``mask`` is set; the others stay at θ0.

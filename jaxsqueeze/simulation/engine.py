@@ -248,7 +248,7 @@ def ahead(model: Model, st: State):
 def step(model: Model, st: State) -> State:
     """One loop iteration: one solve at :func:`target`, then the phase's update, which may
     accept the solve as the next row."""
-    model = dataclasses.replace(model, ev_tol=model.ev_tol / jnp.asarray(REFINE[0], model.ev_tol.dtype) ** st.stats.refined)
+    model = dataclasses.replace(model, ev_tol=model.ev_tol / jnp.asarray(REFINE[0], model.ev_tol.dtype) ** st.stats.refined.astype(model.ev_tol.dtype))
     with jax.named_scope("target"):      # (the scopes name the parts in profiles: profile_row.py)
         d = target(model, st)
     with jax.named_scope("solve"):
@@ -273,9 +273,9 @@ def reconcile(model: Model, st: State) -> State:
         over = over | (jnp.sum(st.nodes.mode >= SLIP_POS) > cfg.sliding)
     fault = jnp.where(over & (st.fault == RUNNING), Status.OVERFLOW, st.fault).astype(jnp.int32)
     s = st.stats
-    stats = s._replace(refreshes=s.refreshes + fresh,
-                       contacts=jnp.maximum(s.contacts, jnp.sum(st.nodes.mode > FREE)).astype(jnp.int32),
-                       sliding=jnp.maximum(s.sliding, jnp.sum(st.nodes.mode >= SLIP_POS)).astype(jnp.int32))
+    stats = s._replace(refreshes=s.refreshes + fresh.astype(jnp.int32),
+                       contacts=jnp.maximum(s.contacts, jnp.sum(st.nodes.mode > FREE, dtype=jnp.int32)),
+                       sliding=jnp.maximum(s.sliding, jnp.sum(st.nodes.mode >= SLIP_POS, dtype=jnp.int32)))
     # the slots cannot hold the new contact set (apply_event or this update found more contacts
     # or sliding contacts than slots), so no solve of it is right: a running squeeze ends here,
     # and its last row stays the last one solved with every contact in its slot
@@ -546,7 +546,7 @@ def _log(model: Model, st: State, flag, kinds, finger, d):
     ev_d, ev_n, ev_k, ev_f = st.events
     events = (jnp.where(new, d, ev_d), jnp.where(new, model.op.nodes.astype(jnp.int32)[src], ev_n),
               jnp.where(new, kinds.astype(jnp.int32)[src], ev_k), jnp.where(new, finger.astype(jnp.int32)[src], ev_f))
-    n_ev = (st.n_ev + jnp.sum(flag)).astype(jnp.int32)
+    n_ev = st.n_ev + jnp.sum(flag, dtype=jnp.int32)
     return events, n_ev, jnp.where(n_ev > E, Status.EVENT_OVERFLOW, st.fault).astype(jnp.int32)
 
 
@@ -722,7 +722,7 @@ def check(model: Model, st: State, sol: Solution, dsol: Solution, d_star):
         if d_star.dtype == jnp.float64 and model.cfg.friction_model != "frictionless" else jnp.zeros((), bool)
     fault = jnp.where((undone | unsettled) & ~refine & (st.fault == RUNNING), Status.STALLED, st.fault).astype(jnp.int32)
     settle = unsettled & refine              # CHECK again at d*: the finer tolerance, SETTLE_ITERS more passes
-    done = lambda: _with(st, fault=fault, stats=st.stats._replace(refined=st.stats.refined + refine))  # noqa: E731
+    done = lambda: _with(st, fault=fault, stats=st.stats._replace(refined=st.stats.refined + refine.astype(jnp.int32)))  # noqa: E731
     return lax.cond(again, retry, done), ~again & ~settle
 
 

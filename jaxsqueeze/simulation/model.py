@@ -230,7 +230,7 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
 
 def _scaled_curve(c, L):
     """A curve in metres as one in scaled lengths (knots / L; coefficients of t^k scale as L^(1-k))."""
-    return boundary.Curve(jnp.asarray(c.knots) / L, jnp.asarray(c.coef) * (L ** (2.0 - jnp.arange(4)))[None, :, None])
+    return boundary.Curve(jnp.asarray(c.knots) / L, jnp.asarray(c.coef) * (L ** jnp.arange(2.0, -2.0, -1.0))[None, :, None])
 
 
 def _turn(n, a):

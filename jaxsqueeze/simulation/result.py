@@ -240,12 +240,12 @@ def to_result(st, op: Compliance, grasp) -> SqueezeResult:
     Fs = jnp.where(st.invalid >= 0, 0.0, Fs)
     depth, mode, finger, theta, F, u, C, alpha, g, push = st.hist
     k = jnp.minimum(st.count, depth.shape[0])
-    rows = jnp.arange(depth.shape[0])
+    rows = jnp.arange(depth.shape[0], dtype=k.dtype)
     last = jnp.minimum(rows, k - 1)                  # pad with the last valid row
     pad = lambda a: a[last]  # noqa: E731
     ev_d, ev_n, ev_k, ev_f = st.events
     n_ev = jnp.minimum(st.n_ev, ev_d.shape[0])
-    ev_n, ev_k, ev_f = (jnp.where(jnp.arange(ev_d.shape[0]) < n_ev, a, -1) for a in (ev_n, ev_k, ev_f))   # padding
+    ev_n, ev_k, ev_f = (jnp.where(jnp.arange(ev_d.shape[0], dtype=n_ev.dtype) < n_ev, a, -1) for a in (ev_n, ev_k, ev_f))   # padding
     gs = jnp.array([L, L, 1.0], st.g.dtype)
     # a placed finger that cannot touch the object (margin −π, INFEASIBLE_GRIP): its one row
     # records where the fingertips were placed, so no node is in contact

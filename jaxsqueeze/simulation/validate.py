@@ -256,7 +256,7 @@ def _r_rotation(values, xp):
     # max over 0 <= d' <= depth of |alpha(d')| is at most sum_k |c_k| depth^k (polyval order)
     d = xp.asarray(d)
     d = xp.where(_finite_pos(xp, d), d, 0.0)[..., None, None]       # a bad depth is reported as such
-    e = xp.arange(r.shape[-1] - 1, -1, -1)
+    e = xp.arange(r.shape[-1] - 1, -1, -1).astype(d.dtype)
     powers = d ** xp.reshape(e, (1,) * (d.ndim - 1) + e.shape)
     turn = xp.sum(xp.where(xp.isfinite(r), xp.abs(r), 0.0) * powers, axis=-1)
     return ok & xp.all(turn <= MAX_ROTATION, axis=-1)

@@ -348,7 +348,7 @@ def test_three_builds_agree(name, max_edge):
     ops = {m: op_of(name, m, max_edge) for m in METHODS}
     if name == "rectangle" and max_edge == 0.01:    # README, "Your JAX settings": the same numbers
         pinch = lambda op: jsq.deform(op, mesh.boundary[:2], np.full((2, 2), 1e-3)).forces  # noqa: E731
-        with jax.numpy_rank_promotion("raise"):
+        with jax.numpy_rank_promotion("raise"), jax.numpy_dtype_promotion("strict"):
             raised = {m: pinch(fem.compliance(mesh, MAT, method=m)) for m in METHODS}
         for m in METHODS:
             np.testing.assert_array_equal(np.asarray(raised[m]), np.asarray(pinch(ops[m])))
