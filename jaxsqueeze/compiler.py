@@ -42,6 +42,12 @@ are taken of the region as ordinary operations (the jvp of a kernel call can lea
 unused). :func:`top_level_trace` tells code traced for a library-compiled program (where
 the options hold) from code traced in a user's ``jit``.
 
+**Full-precision products** (:func:`precise`). Every program the library traces computes
+its matrix products at ``jax.lax.Precision.HIGHEST``: JAX's default lets an NVIDIA GPU since
+Ampere round float32 operands to TF32 (10-bit mantissas, relative errors ~5e-4), and a
+user's ``jax.default_matmul_precision`` would otherwise reach the library's products too.
+On the CPU and in float64 nothing changes.
+
 Every choice here and in the batch rules follows :func:`platform`, the platform a computation
 runs on, so that a squeeze pinned to the CPU on a GPU machine (``with
 jax.default_device(jax.devices("cpu")[0])``) is compiled and batched as on a CPU.
@@ -123,6 +129,22 @@ def _accepted(opts: dict) -> bool:
     return True
 
 
+#: the precision of every matrix product in the library's programs (see :func:`precise`)
+MATMUL_PRECISION = "highest"
+
+
+def precise(fun):
+    """``fun`` traced with its matrix products (``@``, ``jnp.dot``, ``einsum``, and those of
+    JAX's own rules, derivatives included) at :data:`MATMUL_PRECISION`, whatever the
+    caller's ``jax.default_matmul_precision`` and the device's default (TF32 for float32 on
+    recent NVIDIA GPUs). Put it under a ``jax.jit``: the products are fixed when traced."""
+    @functools.wraps(fun)
+    def traced(*args, **kwargs):
+        with jax.default_matmul_precision(MATMUL_PRECISION):
+            return fun(*args, **kwargs)
+    return traced
+
+
 def _top_level() -> bool:
     """No program is being staged around the call (inside ``jit`` even a new constant is a
     tracer; under an eager ``vmap`` or ``jvp`` it is not)."""
@@ -130,9 +152,11 @@ def _top_level() -> bool:
 
 
 class TopLevelJit:
-    """``jax.jit(fun, **jit_kwargs)``, compiled with :func:`options` when called at the top level."""
+    """``jax.jit(fun, **jit_kwargs)`` of :func:`precise` ``fun``, compiled with :func:`options`
+    when called at the top level."""
 
     def __init__(self, fun, **jit_kwargs):
+        fun = precise(fun)
         self.plain = jax.jit(fun, **jit_kwargs)
         self._fun, self._kwargs, self._tuned = fun, jit_kwargs, {}
         functools.update_wrapper(self, fun)
@@ -278,5 +302,5 @@ def jit(fun=None, **jit_kwargs):
     return TopLevelJit(fun, **jit_kwargs)
 
 
-__all__ = ["CPU_OPTIONS", "NO_CUSTOM_FUSIONS", "PACK_LIMIT", "TopLevelJit", "can_fuse", "in_kernel", "jit", "one_kernel",
-           "options", "top_level_trace"]
+__all__ = ["CPU_OPTIONS", "MATMUL_PRECISION", "NO_CUSTOM_FUSIONS", "PACK_LIMIT", "TopLevelJit", "can_fuse", "in_kernel",
+           "jit", "one_kernel", "options", "precise", "top_level_trace"]

@@ -127,6 +127,42 @@ def test_float32_programs_compile_without_region_analysis():
     np.testing.assert_allclose(narrow, wide, rtol=1e-6)
 
 
+def test_every_matrix_product_is_full_precision_whatever_the_callers_setting():
+    """``compiler.precise``: under a caller's ``jax.default_matmul_precision("bfloat16")``
+    (DEFAULT precision, which on NVIDIA GPUs since Ampere rounds float32 operands to TF32),
+    every ``dot_general`` in the library's programs is HIGHEST: a squeeze, its ``jax.jacfwd``
+    and ``jax.vmap`` (whose custom rules JAX traces later, outside the squeeze's own trace), a
+    placed squeeze with an adversary and its quality, ``deform`` under ``jax.jvp`` and the
+    element stresses. (Lowered only: on the CPU both precisions compute the same.)"""
+    import re
+
+    import jaxsqueeze as jsq
+    from jaxsqueeze.plan import quality
+    mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.02, refine_near=[[-0.005, -0.05], [0.005, 0.05]],
+                                refine_edge=0.005)
+    grip = (jsq.scene.nearest_boundary_node(mesh, (-0.005, -0.05)), jsq.scene.nearest_boundary_node(mesh, (0.005, 0.05)))
+    mat = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
+    scene = jsq.Scene(mesh=mesh, material=mat, fingers=jsq.Fingers(radius=0.01), grip=grip, friction=0.2, depth=0.015)
+    P = float(scene.curve().perimeter)
+    placed = scene.replace(grip=None, placement=jsq.Placement(s=(0.0, P / 2)), adversary=jsq.Adversary(s=P / 4, push=0.003))
+    op = scene.operator()
+    programs = {
+        "squeeze, jacfwd in mu": (jax.jacfwd(lambda mu: jsq.squeeze(scene.replace(friction=mu)).total_force), 0.2),
+        "squeeze, vmap over mu": (jax.vmap(lambda mu: jsq.squeeze(scene.replace(friction=mu)).total_force),
+                                  jnp.array([0.2, 0.3])),
+        "placed and pushed": (lambda s: quality.adversary_work(jsq.squeeze(placed.replace(placement=jsq.Placement(s=s)))),
+                              jnp.array([0.0, P / 2])),
+        "deform, jvp": (lambda d: jax.jvp(lambda d: jsq.deform(op, np.array(grip), d).displacement, (d,), (d,)),
+                        jnp.full((2, 2), 1e-3)),
+        "element stress": (lambda u: jsq.fem.element_stress(mesh, mat, u), jnp.zeros((mesh.n, 2))),
+    }
+    with jax.default_matmul_precision("bfloat16"):
+        for name, (fn, x) in programs.items():
+            dots = re.findall(r"stablehlo\.dot_general[^\n]*", jax.jit(fn).lower(x).as_text())
+            assert dots, name
+            assert all("precision = [HIGHEST, HIGHEST]" in d for d in dots), (name, [d for d in dots if "HIGHEST" not in d][:1])
+
+
 def test_an_option_this_jaxlib_rejects_is_left_out(fresh_options):
     if jax.default_backend() == "cpu":   # the others are kept
         fresh_options.setattr(compiler, "CPU_OPTIONS", {"xla_cpu_no_such_option_in_any_jaxlib": True,

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compiler import precise
 from ..geometry import boundary
 from ..numbers import real_array
 from ..tracing import is_concrete
@@ -33,6 +34,7 @@ def bordered_matrix(A: jax.Array, B: jax.Array, active: jax.Array) -> jax.Array:
 
 
 @jax.jit
+@precise
 def bordered_solve(A: jax.Array, B: jax.Array, d: jax.Array, active: jax.Array | None = None):
     """Solve eq. (4): A f + B g = d, Bᵀ f = 0.
 
@@ -106,6 +108,7 @@ def deform(op: Compliance, nodes, displacements) -> Deformation:
 
 
 @jax.jit
+@precise
 def _deform(op: Compliance, slots, d):
     dofs = slot_dofs(slots)
     f_hat, g = bordered_solve(op.G[dofs][:, dofs], op.N[dofs], d.reshape(-1) / op.length)

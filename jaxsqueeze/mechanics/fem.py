@@ -17,6 +17,7 @@ from jax.experimental import sparse as jsparse
 from threadpoolctl import threadpool_limits
 
 from .material import Material
+from ..compiler import precise
 from ..geometry.mesh import Mesh
 from ..tracing import as_array
 from .operator import Compliance, FieldMap, rigid_modes
@@ -70,6 +71,7 @@ def _corner_stress(xy, ue, nu):
 
 
 @jax.jit
+@precise
 def _stress(points, triangles, u, nu):
     return jax.vmap(_corner_stress, in_axes=(0, 0, None))(points[triangles], u[triangles], nu)
 
@@ -102,10 +104,11 @@ def von_mises(stress) -> jax.Array:
 
 
 #: element stiffnesses (t, 6, 6) from the triangles' corners (t, 3, 2), lifted from the kernel
-corner_matrices = jax.jit(jax.vmap(element_stiffness, in_axes=(0, None)))
+corner_matrices = jax.jit(precise(jax.vmap(element_stiffness, in_axes=(0, None))))
 
 
 @jax.jit
+@precise
 def element_matrices(points: jax.Array, triangles: jax.Array, nu) -> jax.Array:
     """All element stiffnesses (t, 6, 6) for E = 1, thickness = 1."""
     return corner_matrices(points[triangles], nu)
@@ -225,6 +228,7 @@ def _dense_K(pts, triangles, nu):
 
 
 @jax.jit
+@precise
 def _dense_build(pts, triangles, nu, bdofs, pins):
     """(2n, 2m) columns of the pinned generalized inverse at the boundary DOFs."""
     K = _dense_K(pts, triangles, nu)
@@ -256,6 +260,7 @@ def _spd_solve_jvp(primals, tangents):
 
 
 @jax.jit
+@precise
 def _spectral_build(pts, triangles, nu, bdofs, pins):
     """(2n, 2m) columns of the pseudo-inverse K⁺ = Σ v vᵀ/λ over the 2n−3 positive modes (eq. 3)."""
     K = _dense_K(pts, triangles, nu)

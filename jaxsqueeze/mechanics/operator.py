@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compiler import precise
 from ..tracing import as_array, is_concrete
 
 
@@ -135,6 +136,7 @@ def _field_linear_jvp(fmap, primals, tangents):
 
 
 @functools.partial(jax.jit, static_argnums=0)     # one program, not ~15 small ones, under eager jacfwd/vmap
+@precise
 def _field(fmap: FieldMap, f_hat, g):
     u = _field_linear(fmap, f_hat) + rigid_modes(jnp.asarray(fmap.points, f_hat.dtype)) @ g
     return u.reshape(-1, 2)

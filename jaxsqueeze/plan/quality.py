@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compiler import precise
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
 from ..numbers import positive, real_array
@@ -59,7 +60,7 @@ def per_result(fn):
     Other arguments are shared by the members. A quality of the result alone runs as one
     compiled program (under an eager ``jax.jacfwd`` its ~25 small operations would each be
     compiled on their own)."""
-    whole = jax.jit(fn)
+    whole = jax.jit(precise(fn))
 
     @functools.wraps(fn)
     def wrapped(res, *args, **kwargs):

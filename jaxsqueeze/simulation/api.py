@@ -97,7 +97,7 @@ def grasp_of(scene: Scene, op: Compliance, validated: bool = False) -> Grasp:
 #: :func:`grasp_of` of a traced scene as one program: under an eager ``jax.jacfwd`` or
 #: ``jax.vmap`` its ~70 small operations (the conversions and the traced validation) would
 #: each be compiled on its own the first time (~3 s on 2 cores)
-_traced_grasp = jax.jit(functools.partial(grasp_of, validated=False))
+_traced_grasp = jax.jit(compiler.precise(functools.partial(grasp_of, validated=False)))
 
 
 def invalid_index(grasp: Grasp, scene: Scene, op: Compliance) -> jax.Array:
@@ -151,6 +151,7 @@ def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
     or an absent placement."""
     leaves, tree = jax.tree.flatten((op, grasp))
 
+    @compiler.precise         # (the rules trace it again, later, outside the core's trace)
     def sim(*xs):
         return simulate(*jax.tree.unflatten(tree, xs), cfg)
 
