@@ -98,7 +98,8 @@ def lookup(table, nodes):
     or out-of-range node. Traceable: a bad node gives −1, never another node (eager numbers
     give a numpy array, without device round trips)."""
     xp = np if is_concrete((table, nodes)) else jnp
-    nodes = xp.asarray(nodes)
+    with jax.numpy_dtype_promotion("standard"):      # (i, j) may be two integer types
+        nodes = xp.asarray(nodes)
     n = table.shape[0]
     ok = (nodes >= 0) & (nodes < n)
     return xp.where(ok, xp.asarray(table)[xp.clip(nodes, 0, n - 1)], -1)

@@ -49,6 +49,7 @@ def _strain_matrix(xy: jax.Array):
 def _elasticity(nu, dtype):
     """Plane-stress D (3, 3) for E = 1: [[1, ν, 0], [ν, 1, 0], [0, 0, (1 − ν)/2]] / (1 − ν²),
     from numpy constants (for the same reason as ``z`` above)."""
+    nu = jnp.asarray(nu, dtype)
     return (np.array(_D0, dtype) + nu * np.array(_D1, dtype)) / (1 - nu**2)
 
 
@@ -135,7 +136,8 @@ def stiffness(mesh: Mesh, material: Material) -> jsparse.BCOO:
     """
     ke = element_matrices(jnp.asarray(mesh.points), jnp.asarray(mesh.triangles), material.nu)
     rows, cols = _coo(mesh.triangles)
-    data = (material.E * material.thickness) * ke.reshape(-1)
+    scale = jnp.asarray(material.E, ke.dtype) * jnp.asarray(material.thickness, ke.dtype)
+    data = scale * ke.reshape(-1)
     idx = jnp.asarray(np.stack([rows, cols], axis=1))
     return jsparse.BCOO((data, idx), shape=(2 * mesh.n, 2 * mesh.n))
 

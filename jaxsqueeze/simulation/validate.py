@@ -377,7 +377,8 @@ def invalid_index(values: dict):
               for k, v in values.items()}
     bad, idx = [], []
     for k, rule in enumerate(RULES):
-        ok = rule.valid(values, jnp)
+        with jax.numpy_dtype_promotion("standard"):     # the caller's numbers, of whatever types
+            ok = rule.valid(values, jnp)
         if ok is not None:
             bad.append(~jnp.asarray(ok, bool))
             idx.append(k)

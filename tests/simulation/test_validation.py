@@ -213,6 +213,24 @@ def test_scene_values_eager_and_batched(square):
     assert int(g(jnp.array([sc.grip[0]] * 2))) == V.FIELDS.index("grip")
 
 
+def test_numbers_of_mixed_types_trace_under_strict_dtype_promotion(square):
+    """README, "Your JAX settings": a scene given as float32, int16 and int64 numbers in a
+    float64 session traces under ``jax.numpy_dtype_promotion("strict")`` (the traced
+    validation and the grip lookup take the caller's numbers as given; the assembly casts ν to
+    the mesh's precision), and its stiffness is the float64 scene's to float32 round-off of ν.
+    Promotion is decided while tracing, so lowering the jitted squeeze checks every operation."""
+    f32 = np.float32
+    sc = _scene(square)
+    mixed = sc.replace(material=jsq.Material(E=f32(1e5), nu=jnp.float32(0.3), thickness=0.0254),
+                       fingers=jsq.Fingers(radius=f32(0.01)), grip=(np.int16(sc.grip[0]), np.int64(sc.grip[1])),
+                       friction=jnp.float32(0.5), depth=f32(0.01))
+    with jax.numpy_dtype_promotion("strict"):
+        jax.jit(lambda s: jsq.squeeze(s).total_force).lower(mixed)
+        K = jsq.fem.stiffness(square, mixed.material).todense()
+    assert K.dtype == jnp.float64
+    np.testing.assert_allclose(K, jsq.fem.stiffness(square, sc.material).todense(), rtol=0, atol=1e-6 * np.abs(K).max())
+
+
 def test_nearest_boundary_node_warns_when_two_nodes_are_equally_near(square):
     """(0, -0.05) lies midway between two nodes of the 20 mm square: which one round-off picks
     decides whether a 'centred' grip is slanted (11 degrees here, a fifth of the grip force
