@@ -629,7 +629,9 @@ def shape_problems(scene) -> list[str]:
         if value is None and "." in name and name.split(".")[0] in ("settings", "adversary"):
             continue                                    # None: the default
         if value is None or isinstance(value, (str, bytes)) or np.asarray(value).dtype.kind not in "iuf":
-            out.append(f"{name} = {value!r}: expected a number")
+            band = name == "material.nu" and type(scene.mesh).__name__ == "Band"
+            out.append(f"{name} = {value!r}: expected a number" + (
+                " (a band ignores nu, but a Material holds one: pass any valid value, e.g. nu=0.3)" if band else ""))
             continue
         x = np.asarray(value, float)
         if x.ndim:

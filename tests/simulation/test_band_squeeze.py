@@ -284,6 +284,9 @@ def test_band_frame_helpers():
     # E only rescales: one cached operator
     a, b = compliance_of(band, jsq.Material(2e9, 0.3, 5e-3)), compliance_of(band, jsq.Material(1e9, 0.1, 5e-3))
     assert a.G is b.G and float(a.stiffness) == 2 * float(b.stiffness)
+    # a band ignores nu, but a Material holds one: nu=None says so before any work
+    with pytest.raises(ValueError, match=r"material.nu = None: expected a number \(a band ignores nu, .* nu=0.3\)"):
+        jsq.squeeze(sc.replace(material=jsq.Material(2e9, None, 5e-3)))
 
 
 # ----------------------------------------------------------------------------- band vs solid ring
