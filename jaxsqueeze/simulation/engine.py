@@ -248,7 +248,8 @@ def ahead(model: Model, st: State):
 def step(model: Model, st: State) -> State:
     """One loop iteration: one solve at :func:`target`, then the phase's update, which may
     accept the solve as the next row."""
-    model = dataclasses.replace(model, ev_tol=model.ev_tol / jnp.asarray(REFINE[0], model.ev_tol.dtype) ** st.stats.refined.astype(model.ev_tol.dtype))
+    dt = model.ev_tol.dtype
+    model = dataclasses.replace(model, ev_tol=model.ev_tol / jnp.asarray(REFINE[0], dt) ** st.stats.refined.astype(dt))
     with jax.named_scope("target"):      # (the scopes name the parts in profiles: profile_row.py)
         d = target(model, st)
     with jax.named_scope("solve"):
