@@ -9,8 +9,10 @@ Layers, each importing only from the ones above it in this list:
 * :mod:`jaxsqueeze.post`       views, cones, plots, export
 * :mod:`jaxsqueeze.io`         scenefile, cli
 
-``jaxsqueeze.tracing`` (is a value a tracer) and ``jaxsqueeze.numbers`` (is an input made of real
-numbers) serve every layer.
+``jaxsqueeze.tracing`` (is a value a tracer), ``jaxsqueeze.numbers`` (is an input made of real
+numbers) and ``jaxsqueeze.compiler`` (how the library's programs are compiled: options, one-kernel
+regions, full-precision products) serve every layer and import from none
+(``tests/test_layers.py``).
 
 The main names are imported here. The module names of version 0.1 (``jaxsqueeze.fem``,
 ``jaxsqueeze.scene``, ``jaxsqueeze.views``, ...) keep working as aliases of their new homes;
