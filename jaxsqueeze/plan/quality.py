@@ -127,12 +127,15 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01, scene=None):
         mu = real_array(friction, "slip_margin's friction (the Coulomb μ of the squeeze)")
         if not np.all(mu >= 0):                      # NaN too; μ = ∞ (full stick) is allowed
             raise ValueError(f"slip_margin's friction must be ≥ 0 (μ = ∞ for full stick); got {mu.tolist()}")
-    surface = _surface(scene)
+    x0, loops = _surface(scene) or (None, None)
     batch = jnp.shape(res.depth)[:-1]
+    dt = jnp.result_type(res.forces)           # (a Python μ and an array μ: one program)
+    friction, tau = jnp.asarray(friction, dt), jnp.asarray(tau, dt)
+    one = lambda r, mu: _slip_margin(r, mu, tau, x0, loops=loops)  # noqa: E731
     if jnp.ndim(friction) == 0:
-        return per_result(_slip_margin)(res, friction, tau, surface)
+        return jax.vmap(one, in_axes=(0, None))(res, friction) if len(batch) == 1 else one(res, friction)
     if len(batch) == 1 and jnp.shape(friction) == batch:
-        return jax.vmap(_slip_margin, in_axes=(0, 0, None, None))(res, friction, tau, surface)
+        return jax.vmap(one)(res, friction)
     raise ValueError(f"friction of shape {jnp.shape(friction)}: expected one μ" +
                      (f", or one per member of the batched result (shape {batch})" if batch else " for one result"))
 
@@ -148,15 +151,16 @@ def _surface(scene):
     return obj.points, (obj.m,)
 
 
-def _slip_margin(res: SqueezeResult, friction, tau, surface=None):
+@functools.partial(jax.jit, static_argnames="loops")     # one program (op by op, a first call took 2 s)
+@precise
+def _slip_margin(res: SqueezeResult, friction, tau, x0=None, loops=None):
     r = _squeeze_row(res)
     F = jnp.asarray(res.forces)[r]
     mode, fg = jnp.asarray(res.modes)[r], jnp.asarray(res.finger)[r]
-    if surface is None:      # segment contacts: the fingertip normal at the contact (from its centre)
+    if x0 is None:           # segment contacts: the fingertip normal at the contact (from its centre)
         ang = jnp.asarray(res.theta)[r] + jnp.take_along_axis(jnp.asarray(res.alpha)[r], fg.astype(jnp.int32), 0)
         axis = jnp.stack([jnp.cos(ang), jnp.sin(ang)], -1)
     else:                    # point contacts: the inward normal of the deformed surface
-        x0, loops = surface
         axis = -boundary.normals(jnp.asarray(x0, F.dtype) + jnp.asarray(res.boundary_displacement)[r], loops)
     fn = jnp.sum(F * axis, -1)
     ft = axis[:, 0] * F[:, 1] - axis[:, 1] * F[:, 0]

@@ -247,6 +247,9 @@ def test_invalid_lanes_of_a_batch_are_statuses_and_record_nothing(slanted):
     mus = jnp.array([0.5, 0.4, 0.3])                   # one μ per member (a shape error before)
     one = [float(quality.slip_margin(jax.tree.map(lambda a: a[k], out), mus[k])) for k in range(3)]
     np.testing.assert_allclose(quality.slip_margin(out, mus), one, rtol=1e-12)
+    programs = quality._slip_margin._cache_size()       # one compiled program per shape, not op by op
+    quality.slip_margin(jax.tree.map(lambda a: a[1], out), 0.2), quality.slip_margin(out, mus[::-1])
+    assert quality._slip_margin._cache_size() == programs
     with pytest.raises(ValueError, match=r"friction of shape \(2,\): expected one μ, or one per member"):
         quality.slip_margin(out, mus[:2])
     # the one-squeeze methods say so (they were "only scalar arrays can be converted")
