@@ -16,7 +16,7 @@ import scipy.sparse.linalg as spla
 from jax.experimental import sparse as jsparse
 from threadpoolctl import threadpool_limits
 
-from .material import Material
+from .material import Material, checked
 from ..compiler import precise
 from ..geometry.mesh import Mesh
 from ..tracing import as_array
@@ -85,12 +85,14 @@ def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
     engineering shear strain), σ_zz = 0; rigid motions give zero stress. A pure JAX function of
     the displacement and the material: ``jax.jit`` (with the mesh static), ``vmap``, ``jvp``
     and ``grad`` apply."""
+    checked(material)
     u = jnp.asarray(displacement)
     if u.shape != (mesh.n, 2):
         raise ValueError(f"displacement must be (n, 2) = {(mesh.n, 2)} nodal displacements [m] of the mesh, "
                          f"got shape {u.shape}")
     pts = jnp.asarray(mesh.points, u.dtype)
-    return material.E * _stress(pts, jnp.asarray(mesh.triangles), u, material.nu)
+    sig = _stress(pts, jnp.asarray(mesh.triangles), u, material.nu)
+    return jnp.asarray(material.E, sig.dtype) * sig
 
 
 def von_mises(stress) -> jax.Array:
@@ -134,7 +136,7 @@ def stiffness(mesh: Mesh, material: Material) -> jsparse.BCOO:
 
     Duplicate entries (one per element sharing a DOF pair) are kept and sum on use.
     """
-    ke = element_matrices(jnp.asarray(mesh.points), jnp.asarray(mesh.triangles), material.nu)
+    ke = element_matrices(jnp.asarray(mesh.points), jnp.asarray(mesh.triangles), checked(material).nu)
     rows, cols = _coo(mesh.triangles)
     scale = jnp.asarray(material.E, ke.dtype) * jnp.asarray(material.thickness, ke.dtype)
     data = scale * ke.reshape(-1)
@@ -197,6 +199,7 @@ def compliance(mesh: Mesh, material: Material, method: str = "sparse") -> Compli
     """
     if method not in METHODS:
         raise ValueError(f"method={method!r} is not a compliance build; choose one of {METHODS}.")
+    checked(material)
     L = object_length(mesh)
     pts = mesh.points / L
     b = np.asarray(mesh.boundary)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
-from ..tracing import numeric
+from ..tracing import is_concrete, numeric
 
 
 @jax.tree_util.register_dataclass
@@ -37,3 +37,26 @@ class Material:
                 raise ValueError(f"Material.{name}={value!r} is not finite; {what}.")
             if not np.all(ok(v)):
                 raise ValueError(f"Material.{name}={value!r} is out of range; {what}.")
+
+
+_UNITS = {"E": "Pa", "nu": "-", "thickness": "m"}
+
+
+def checked(material: Material) -> Material:
+    """``material`` when each of E, ν and the thickness is one real number (or a tracer);
+    else ``ValueError`` naming the field. A ``Material`` holds anything (JAX rebuilds it with
+    placeholders, masks and axis specs), so the functions that compute with one check it:
+    a cast would read "1e5" as 1e5 Pa and True as 1 Pa, and drop an imaginary part."""
+    if not isinstance(material, Material):
+        raise TypeError(f"expected a jsq.Material(E, nu, thickness), got {type(material).__name__}")
+    for name, unit in _UNITS.items():
+        v = getattr(material, name)
+        if not is_concrete(v):
+            continue
+        if v is None or isinstance(v, (str, bytes, bool, np.bool_)) or np.asarray(v).dtype.kind not in "iuf":
+            raise ValueError(f"Material.{name} = {v!r:.80}: expected one real number [{unit}]")
+        if np.ndim(v):
+            raise ValueError(f"Material.{name} has shape {np.shape(v)}: one material takes one number; for many "
+                             "values use jax.vmap")
+    return material
+

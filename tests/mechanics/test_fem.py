@@ -7,6 +7,7 @@ agreement of the three compliance builds (DESIGN 2.2). Runs in float64 (conftest
 from __future__ import annotations
 
 import functools
+import re
 
 import jax
 import jax.numpy as jnp
@@ -580,6 +581,24 @@ def test_deform_errors():
 def test_material_validation(kwargs, field):
     with pytest.raises(ValueError, match=rf"Material\.{field}="):
         Material(**kwargs)
+
+
+@pytest.mark.parametrize("field, value, says", [
+    ("E", "1e5", "= '1e5': expected one real number [Pa]"), ("E", True, "= True: expected one real number [Pa]"),
+    ("nu", 0.3 + 0.1j, "= (0.3+0.1j): expected one real number [-]"), ("thickness", None, "= None: expected one real"),
+    ("E", [1e5, 2e5], "has shape (2,): one material takes one number"),
+])
+def test_fem_functions_refuse_a_material_that_is_not_numbers(field, value, says):
+    """A Material holds anything (JAX rebuilds pytrees with placeholders and masks), so the
+    functions that compute with one check it: ``fem.stiffness`` read E="1e5" as 1e5 Pa and
+    True as 1 Pa, ``element_stress`` returned complex stresses for a complex E, and the others
+    failed with a TypeError from deep inside."""
+    mesh = mesh_of("rectangle", 0.05)
+    mat = Material(**{**dict(E=1e5, nu=0.3, thickness=0.01), field: value})
+    for call in (lambda: fem.stiffness(mesh, mat), lambda: fem.compliance(mesh, mat),
+                 lambda: fem.element_stress(mesh, mat, np.zeros((mesh.n, 2)))):
+        with pytest.raises(ValueError, match=re.escape(f"Material.{field} {says}")):
+            call()
 
 
 def test_material_edge_values_accepted():
