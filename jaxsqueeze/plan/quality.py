@@ -57,16 +57,14 @@ def _check_result(res, name: str):
 def per_result(fn):
     """``fn`` of one result, mapped (``jax.vmap``) over a batched one: a result of
     ``jax.vmap(squeeze)`` (``depth`` of shape (B, k)) gives one value per member, (B, ...).
-    Other arguments are shared by the members. A quality of the result alone runs as one
-    compiled program (under an eager ``jax.jacfwd`` its ~25 small operations would each be
-    compiled on their own)."""
+    The quality runs as one compiled program (under an eager ``jax.jacfwd`` its ~25 small
+    operations would each be compiled on their own)."""
     whole = jax.jit(precise(fn))
 
     @functools.wraps(fn)
-    def wrapped(res, *args, **kwargs):
+    def wrapped(res):
         _check_result(res, fn.__name__)
-        one = (lambda r: fn(r, *args, **kwargs)) if args or kwargs else whole
-        return jax.vmap(one)(res) if jnp.ndim(res.depth) == 2 else one(res)
+        return jax.vmap(whole)(res) if jnp.ndim(res.depth) == 2 else whole(res)
     return wrapped
 
 
