@@ -265,7 +265,9 @@ def _check_duplicates(pts, used):
     pairs = cKDTree(pts).query_pairs(r=tol, output_type="ndarray")
     if len(pairs):
         raise ValueError(f"duplicate nodes (same coordinates): node pairs {_few(used[pairs])} at "
-                         f"{_few(pts[pairs[:, 0]])}; merge them and renumber the triangles")
+                         f"{_few(pts[pairs[:, 0]])}; merge them and renumber the triangles (a crack or slit of zero width "
+                         "is not supported, its two faces would touch unseen: give it a width of a few "
+                         "percent of its edges)")
 
 
 def _check_hanging(pts, tri, used):

@@ -111,6 +111,19 @@ def test_validation_errors(pts, tri, match):
         Mesh.from_arrays(pts, tri)
 
 
+def test_a_slit_of_zero_width_is_refused_saying_how_to_open_it():
+    """A crack cut into a 4 x 4 grid from its top edge to its centre: the triangles left of it use
+    copies of the nodes on it, so the mesh is manifold but two boundary faces coincide."""
+    pts, tri = grid(4, 4)
+    slit = [k for k in range(len(pts)) if pts[k, 0] == 0.5 and pts[k, 1] > 0.5]
+    copies = {k: len(pts) + j for j, k in enumerate(slit)}
+    pts = np.vstack([pts, pts[slit]])
+    left = pts[tri].mean(axis=1)[:, 0] < 0.5
+    tri[left] = np.vectorize(lambda k: copies.get(k, k))(tri[left])
+    with pytest.raises(ValueError, match=r"duplicate nodes .* crack or slit of zero width is not supported"):
+        Mesh.from_arrays(pts, tri)
+
+
 def test_non_manifold_edge():
     pts = np.array([[0, 0], [1, 0], [0.5, 1], [0.5, -1], [0.3, 2.0]])
     tri = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])          # edge 0-1 in three triangles
