@@ -139,7 +139,8 @@ def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None 
         processes: number of workers; ``None``: one per available core. ``1`` runs inline in
             this process (no pool, no change to this process's configuration).
         chunk: items per task sent to a worker; ``None``: about four tasks per worker.
-        progress: a one-line progress bar on stderr when stderr is a terminal.
+        progress: a one-line progress bar on stderr when stderr is a terminal or a Jupyter
+            notebook's (:func:`interactive`).
         cache: the workers' persistent compilation cache: ``True`` for the default folder
             (:func:`jaxsqueeze.compile_cache.default_path`), a folder, or ``False`` for none.
     Returns:
@@ -162,7 +163,7 @@ def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None 
             raise TypeError(f"map_scenes sends fn to worker processes by name, and {fn!r} cannot be sent ({e}): "
                             "define it at the top level of a module (not a lambda or a nested function), or "
                             "use processes=1") from None
-    bar = _Progress(n, progress and sys.stderr.isatty())
+    bar = _Progress(n, progress and interactive())
     if processes == 1 or n <= 1:
         out = []
         for i, item in enumerate(items):
@@ -244,6 +245,19 @@ def _environment(env: dict):
                 os.environ[k] = v
 
 
+def interactive(stream=None) -> bool:
+    """Whether progress belongs on ``stream`` (default ``sys.stderr``): a terminal, or the
+    output stream of a Jupyter kernel (a notebook redraws a line on ``\\r`` as a terminal
+    does); not a file, a pipe or a test's capture."""
+    stream = sys.stderr if stream is None else stream
+    try:
+        if stream.isatty():
+            return True
+    except (AttributeError, ValueError):         # no isatty, or a closed stream
+        return False
+    return type(stream).__module__.startswith("ipykernel.")
+
+
 class _Progress:
     """``[#####.....] 12/100  3.1 s  eta 10 s`` on one stderr line, redrawn at most 10× a second."""
 
@@ -269,4 +283,4 @@ class _Progress:
             self.on = False
 
 
-__all__ = ["ItemError", "WORKER_ENV", "cpu_count", "map_scenes"]
+__all__ = ["ItemError", "WORKER_ENV", "cpu_count", "host_devices_flag", "interactive", "map_scenes", "split_vmap"]

@@ -1,13 +1,15 @@
 """jaxsqueeze.batch.map_scenes: results in input order, inline equal to the process pool,
 a squeeze in worker processes equal to the same squeeze here; split_vmap equal to vmap on one
-and on two host devices."""
+and on two host devices; progress on a terminal or in a notebook only."""
+import io
 import os
+import sys
 
 import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
-from jaxsqueeze.batch import ItemError, map_scenes
+from jaxsqueeze.batch import ItemError, interactive, map_scenes
 
 
 def _square_and_env(x):
@@ -44,6 +46,34 @@ def test_order_and_inline_equals_pool():
     assert all("xla_cpu_multi_thread_eigen=false" in r[2] for r in pooled)
     assert "xla_cpu_multi_thread_eigen=false" not in os.environ.get("XLA_FLAGS", "")   # restored here
     assert map_scenes(_square_and_env, [], processes=2) == []
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+#: what ipykernel gives a notebook as sys.stderr: no terminal, but it redraws a line on "\r"
+_KernelStream = type("OutStream", (io.StringIO,), {"__module__": "ipykernel.iostream"})
+
+
+class _NoIsatty:
+    def write(self, text):
+        return len(text)
+
+
+def test_progress_goes_to_a_terminal_or_a_notebook_and_nowhere_else(monkeypatch):
+    closed = io.StringIO()
+    closed.close()
+    assert interactive(_Terminal()) and interactive(_KernelStream())
+    assert not interactive(io.StringIO()) and not interactive(closed) and not interactive(_NoIsatty())
+    for stream, shown in ((_Terminal(), True), (_KernelStream(), True), (io.StringIO(), False)):
+        monkeypatch.setattr(sys, "stderr", stream)
+        assert map_scenes(_fail_on_three, [0, 1, 2], processes=1) == [0, 1, 2]
+        assert ("] 3/3 " in stream.getvalue()) is shown, stream.getvalue()
+        stream.truncate(0)
+        map_scenes(_fail_on_three, [0, 1, 2], processes=1, progress=False)
+        assert stream.getvalue() == ""
 
 
 def test_an_item_error_names_the_item():

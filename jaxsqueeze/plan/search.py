@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import compiler
+from ..batch import interactive
 from ..geometry.mesh import Mesh
 from ..numbers import real_array
 from ..simulation import validate
@@ -238,7 +239,7 @@ def _again(scene: Scene, run: Scene, status: int, depth: float) -> Scene | None:
 
 
 def _progress(done, total, t0, label):
-    if sys.stderr.isatty():
+    if interactive():
         rate = done / max(time.perf_counter() - t0, 1e-9)
         print(f"\r{label}: {done}/{total} ({rate:.1f}/s)", end="" if done < total else "\n",
               file=sys.stderr, flush=True)
@@ -267,7 +268,9 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     returns its status with quality 0 and costs only its first solve in a loop. Candidates are
     squeezed with the :func:`quick` capacities first; those that overflow them once more with
     the scene's own, and those that run out of the automatic loop or event bound once more with
-    longer bounds, one at a time (:func:`_again`).
+    longer bounds, one at a time (:func:`_again`). ``progress``: a line on stderr after each
+    chunk (each 16 squeezes of a loop) where stderr is a terminal or a Jupyter notebook's
+    (:func:`jaxsqueeze.batch.interactive`).
     """
     X = candidates(X)
     if chunk is not None:
@@ -550,6 +553,8 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         budget: the most squeezes to run, coarse map included (default: no limit). After the
             coarse map the rest is shared evenly by the starts: each runs at most
             ``budget_left // starts - 1`` iterations (and at most ``steps``).
+        progress: the coarse map's progress line and one line per finished start (the best
+            quality so far) on stderr, where it is a terminal or a Jupyter notebook's.
     Forward-mode gradients (``jax.jacfwd``) of the quality; a step that lands on a failed or
     infeasible placement is undone and the step scale halved (the constraint is the status;
     its margin is in the history). Returns a :class:`Search`.
@@ -644,7 +649,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         if int(s.status) == Status.SUCCESS and float(s.quality) > best_q:
             best_q, best_x = float(s.quality), np.asarray(u) / scale
         histories.append(hist)
-        if progress and sys.stderr.isatty():
+        if progress and interactive():
             print(f"start {k + 1}/{len(init)}: best {best_q:.6g}", file=sys.stderr)
     if best_x is None:
         raise ValueError("no start reached a successful squeeze")

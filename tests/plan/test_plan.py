@@ -1,5 +1,7 @@
 """Grasp planning (DESIGN 2.9): continuous placement, qualities, maps and search."""
+import contextlib
 import dataclasses
+import io
 import os
 
 import jax
@@ -13,6 +15,11 @@ from jaxsqueeze.plan import quality as Q
 from physics import check_states, compiles, nearest, sliding_against_friction, symmetric_square
 
 MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
+
+
+def _kernel_stream():
+    """A stand-in for a Jupyter kernel's sys.stderr (no terminal; progress is shown there too)."""
+    return type("OutStream", (io.StringIO,), {"__module__": "ipykernel.iostream"})()
 
 
 @pytest.fixture(scope="module")
@@ -343,6 +350,14 @@ def test_a_short_vmap_chunk_is_padded_to_a_power_of_two_only(ellipse, monkeypatc
         summ = search._evaluate(ellipse, np.zeros((n, 3)), "squeeze_work", op, "vmap", chunk, False, None, True)
         assert len(summ.status) == n
     assert sizes == [2, 64, 8, 1, 4, 1]
+    # progress: after each chunk (each 16 squeezes of a loop), in a notebook as on a terminal
+    monkeypatch.setattr(search, "_one", lambda scene, qfn, op, x: search.Summary(*(jnp.zeros(()),) * 5))
+    for batch, n, shown in (("vmap", 5, ["4/5", "5/5"]), ("loop", 20, ["16/20", "20/20"])):
+        notebook = _kernel_stream()
+        with contextlib.redirect_stderr(notebook):
+            search._evaluate(ellipse, np.zeros((n, 3)), "squeeze_work", op, batch, 4, True, None, True)
+        assert [line.split(" (")[0] for line in notebook.getvalue().split("\r")[1:]] == \
+            [f"grasp map: {k}" for k in shown]
 
 
 def test_infeasible_placements_are_a_status_inside_a_vmapped_batch(ellipse):
@@ -900,10 +915,12 @@ def test_a_search_history_records_undone_steps_once(ellipse):
     # shapes (other numbers, another start and optimizer: nothing compiles)
     from jaxsqueeze.plan import search
     compiled = search._value_and_grad._cache_size()
-    other = jsq.optimize_placement(ellipse.replace(friction=0.6, depth=0.005, fingers=jsq.Fingers(radius=0.012)),
-                                   "grip_force", init=[[0.01, P / 2]], optimizer=optax.adam(0.05), steps=2,
-                                   progress=False)
+    notebook = _kernel_stream()                  # and a notebook shows where the search is
+    with contextlib.redirect_stderr(notebook):
+        other = jsq.optimize_placement(ellipse.replace(friction=0.6, depth=0.005, fingers=jsq.Fingers(radius=0.012)),
+                                       "grip_force", init=[[0.01, P / 2]], optimizer=optax.adam(0.05), steps=2)
     assert other.squeezes == 3 and search._value_and_grad._cache_size() == compiled
+    assert notebook.getvalue() == f"start 1/1: best {other.quality:.6g}\n"
     from jaxsqueeze.plan.search import GraspMap
     grid = np.linspace(0.0, P, 4)[:3]
     status = np.where(np.eye(3, dtype=bool), jsq.Status.INFEASIBLE_GRIP, jsq.Status.SUCCESS)
