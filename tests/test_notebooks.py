@@ -32,3 +32,7 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
     images = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
               if "image/png" in o.get("data", {})]
     assert len(images) >= 4, "the figures should display"
+    if name == "04_grasp_planning.ipynb":      # the map's and the search's progress reach the notebook
+        stderr = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
+                         if o.get("output_type") == "stream" and o.get("name") == "stderr")
+        assert "\rgrasp map: " in stderr and "start 3/3: best " in stderr, stderr[-500:]
