@@ -19,7 +19,8 @@ from threadpoolctl import threadpool_limits
 from .material import Material, checked
 from ..compiler import precise
 from ..geometry.mesh import Mesh
-from ..tracing import as_array
+from ..numbers import real_array
+from ..tracing import as_array, is_concrete
 from .operator import Compliance, FieldMap, rigid_modes
 
 METHODS = ("sparse", "dense", "spectral")
@@ -82,11 +83,16 @@ def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
     ``displacement`` (n, 2) [m], e.g. ``result.displacement`` or
     :func:`jaxsqueeze.views.row_displacement`. Linear CST elements: the strain, and so the
     stress, is constant over each triangle; σ = E D(ν) ε with ε = (ε_xx, ε_yy, γ_xy) (the
-    engineering shear strain), σ_zz = 0; rigid motions give zero stress. A pure JAX function of
+    engineering shear strain), σ_zz = 0; rigid motions give zero stress; a node's NaN
+    displacement (a row a result does not define) gives NaN in its triangles. A pure JAX function of
     the displacement and the material: ``jax.jit`` (with the mesh static), ``vmap``, ``jvp``
     and ``grad`` apply."""
     checked(material)
+    if is_concrete(displacement):
+        real_array(displacement, "displacement", "m")
     u = jnp.asarray(displacement)
+    if jnp.issubdtype(u.dtype, jnp.integer):       # whole metres: the mesh's points must not round
+        u = u.astype(jnp.asarray(0.0).dtype)
     if u.shape != (mesh.n, 2):
         raise ValueError(f"displacement must be (n, 2) = {(mesh.n, 2)} nodal displacements [m] of the mesh, "
                          f"got shape {u.shape}")
@@ -100,6 +106,14 @@ def von_mises(stress) -> jax.Array:
     √(σ_xx² − σ_xx σ_yy + σ_yy² + 3 τ_xy²), with derivative 0 (not NaN) where the stress is 0,
     as for the other norms a search may differentiate (an unloaded triangle, a grip that never
     started)."""
+    if is_concrete(stress):
+        real_array(stress, "stress", "Pa")
+    stress = jnp.asarray(stress)
+    if jnp.issubdtype(stress.dtype, jnp.integer):
+        stress = stress.astype(jnp.asarray(0.0).dtype)
+    if stress.ndim < 1 or stress.shape[-1] != 3:
+        raise ValueError(f"stress must be plane stresses (..., 3) = (σ_xx, σ_yy, τ_xy) [Pa], e.g. from "
+                         f"element_stress; got shape {stress.shape}")
     sxx, syy, txy = stress[..., 0], stress[..., 1], stress[..., 2]
     q = sxx**2 - sxx * syy + syy**2 + 3 * txy**2
     pos = q > 0

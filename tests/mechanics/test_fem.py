@@ -256,6 +256,17 @@ def test_element_stress_is_hookes_law_and_its_energy_the_stiffness_energy(name):
     assert abs(stress_energy(mesh, MAT, fem.element_stress(mesh, MAT, u)) - want) <= 1e-12 * want
     with pytest.raises(ValueError, match=r"displacement must be \(n, 2\)"):
         fem.element_stress(mesh, MAT, u[:-1])
+    # whole-metre (integer) displacements cast the mesh's points to integers (NaN stresses);
+    # booleans and complex numbers were read as numbers; a von Mises of the wrong shape failed
+    # with an IndexError
+    whole = (mesh.points[:, :1] > 0) * np.array([[1, 0]])
+    np.testing.assert_array_equal(fem.element_stress(mesh, MAT, whole), fem.element_stress(mesh, MAT, whole * 1.0))
+    for bad, dtype in ((u > 0, "bool"), (u + 0j, "complex128")):
+        with pytest.raises(ValueError, match=rf"displacement must be real numbers \[m\]; got dtype {dtype}"):
+            fem.element_stress(mesh, MAT, bad)
+    assert float(fem.von_mises(np.array([0, 2, 0]))) == 2.0
+    with pytest.raises(ValueError, match=r"stress must be plane stresses \(\.\.\., 3\) .* got shape \(4, 2\)"):
+        fem.von_mises(np.zeros((4, 2)))
     # transforms: jit with the mesh static, vmap over fields, jvp in the field (it is linear),
     # grad in nu against central differences
     du = np.roll(u, 1, axis=0)
