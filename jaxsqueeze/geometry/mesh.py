@@ -79,6 +79,12 @@ class Mesh(ByContent):
     offset: np.ndarray
     source: np.ndarray | None = None
 
+    def __repr__(self) -> str:
+        w, h = np.ptp(np.asarray(self.points, float), axis=0) if self.n else (0.0, 0.0)
+        k = len(self.loops)
+        return (f"Mesh({self.n} nodes, {len(self.triangles)} triangles, {self.m} boundary nodes in {k} "
+                f"loop{'s' * (k != 1)}, {w:.4g} × {h:.4g} m)")
+
     @property
     def n(self) -> int:
         return int(self.points.shape[0])

@@ -242,6 +242,11 @@ class Band(ByContent):
     qd2: np.ndarray
     offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
+    def __repr__(self) -> str:
+        w, h = np.ptp(np.asarray(self.points, float), axis=0)
+        return (f"Band({self.m} nodes, perimeter {float(self.perimeter):.4g} m, wall {float(self.width):.4g} m wide "
+                f"and {float(self.height):.4g} m high, {w:.4g} × {h:.4g} m)")
+
     @property
     def m(self) -> int:
         return int(self.points.shape[0])

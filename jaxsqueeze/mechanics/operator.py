@@ -87,6 +87,15 @@ class Compliance:
     loops: tuple = field(metadata=dict(static=True), default=())
     field: FieldMap | None = field(metadata=dict(static=True), default=None, compare=False)
 
+    def __repr__(self) -> str:
+        try:
+            L = self.length
+            size = f"L = {float(L):.4g} m" if is_concrete(L) and np.ndim(L) == 0 else f"L of shape {np.shape(L)}"
+            return (f"Compliance({self.method} build, {self.m} boundary nodes, {size}, {jnp.result_type(self.G)}"
+                    f"{', field map' if self.field is not None else ''})")
+        except Exception:  # noqa: BLE001  (a repr must not raise, whatever JAX's tree code put in the fields)
+            return f"Compliance({self.method} build)"
+
     @property
     def m(self) -> int:
         return self.points.shape[0]

@@ -367,6 +367,15 @@ class GraspMap(NamedTuple):
     def feasible(self) -> np.ndarray:
         return self.status == Status.SUCCESS
 
+    def __repr__(self) -> str:
+        n = len(self.s)
+        gap = f" {float(self.s[1] - self.s[0]):.4g} m apart" if n > 1 else ""
+        ok = self.feasible()
+        at = f" at s = ({float(self.best[0, 0]):.4g}, {float(self.best[0, 1]):.4g}) m" if len(self.best) else ""
+        best = f"best {float(np.max(self.quality[ok])):.4g}{at}" if ok.any() else "none feasible"
+        return (f"GraspMap({n} positions{gap}, {self.evaluations} squeezes, {int(ok.sum())} of {n * n - n} "
+                f"ordered pairs feasible, {best})")
+
 
 def grid(scene: Scene, spacing=None) -> np.ndarray:
     """(n,) arc lengths [m] spaced evenly around the outer loop (default: the mean boundary
@@ -490,6 +499,12 @@ class Search(NamedTuple):
     history: list
     squeezes: int
     screened: int = 0
+
+    def __repr__(self) -> str:
+        s = np.asarray(self.best.s, float)
+        return (f"Search(best quality {float(self.quality):.4g} at s = ({s[0]:.4g}, {s[1]:.4g}) m, angle "
+                f"{float(self.best.angle):.4g} rad; {len(self.history)} start{'s' * (len(self.history) != 1)}, {self.squeezes} squeezes, "
+                f"{self.screened} screened)")
 
 
 def _optax_promotion():

@@ -1,6 +1,7 @@
 """The outcome of a squeeze: :class:`SqueezeResult` (one type, eager or traced) and its event log."""
 from __future__ import annotations
 
+import collections
 import dataclasses
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -154,6 +155,31 @@ class SqueezeResult:
     squeeze_status: jax.Array
     push_work: jax.Array
     squeeze_events: jax.Array
+
+    def __repr__(self) -> str:
+        """One line (``print(res)``, a notebook cell): the outcome, the depth reached, the rows,
+        the events by kind and the grip force; a batch's outcomes; a traced result's sizes.
+        The arrays are the fields (``res.forces``, ...)."""
+        try:
+            return f"SqueezeResult({self._in_words()})"
+        except Exception:  # noqa: BLE001  (a repr must not raise, whatever JAX's tree code put in the fields)
+            return f"SqueezeResult(forces of shape {np.shape(self.forces)})"
+
+    def _in_words(self) -> str:
+        rows, m = np.shape(self.forces)[-3:-1]
+        if not is_concrete((self.status, self.count, self.depth, self.forces)):
+            return f"traced, {rows} rows × {m} boundary nodes"
+        if np.ndim(self.count) != 0:
+            said = collections.Counter(Status(int(k)).name for k in np.ravel(self.status))
+            d = np.asarray(self.final_depth)
+            return (f"batch of {np.size(self.status)}: " + ", ".join(f"{k} {v}" for k, v in said.items())
+                    + f"; final depth {d.min():.4g} to {d.max():.4g} m")
+        kinds = collections.Counter(EVENT_KINDS[int(k)] for k in np.asarray(self.events.kind)[:int(self.n_events)])
+        events = ", ".join(f"{k} {kinds[k]}" for k in sorted(kinds))
+        said = (f"{self.outcome.name} at depth {float(self.final_depth):.4g} m, {int(self.count)} rows, "
+                f"{int(self.n_events)} events{f' ({events})' if events else ''}, grip force {float(self.grip_force):.4g} N")
+        push = float(self._last(self.push))
+        return said + (f", pushed {push:.4g} m" if push > 0 else "")
 
     def _one(self, what: str) -> None:
         """ValueError unless this is one concrete squeeze (not batched, not traced)."""

@@ -142,6 +142,8 @@ def test_compliance_operator_ring():
     band = Band.from_function(curves.circle(R), m)
     op = band_compliance(band, E)
     assert isinstance(op, Compliance) and op.method == "band" and op.loops == (m,)
+    assert repr(band) == f"Band(48 nodes, perimeter {float(band.perimeter):.4g} m, wall 0.0005 m wide and 0.005 m high, 0.08 × 0.08 m)"
+    assert repr(op) == "Compliance(band build, 48 boundary nodes, L = 0.08 m, float64, field map)"
     assert op.G.shape == (2 * m, 2 * m) and op.N.shape == (2 * m, 3) and op.G.dtype == np.float64
     G, N = np.asarray(op.G), np.asarray(op.N)
     L, fs = float(op.length), float(op.force_scale)

@@ -925,6 +925,12 @@ def test_a_search_history_records_undone_steps_once(ellipse):
     grid = np.linspace(0.0, P, 4)[:3]
     status = np.where(np.eye(3, dtype=bool), jsq.Status.INFEASIBLE_GRIP, jsq.Status.SUCCESS)
     gmap = GraspMap(grid, np.ones((3, 3)), status, np.ones((3, 3)), np.zeros((3, 3)), 0.0, np.zeros((0, 3)), 6)
+    # both print in one line (a map printed its four n × n arrays, a search every step)
+    assert repr(gmap) == (f"GraspMap(3 positions {P / 3:.4g} m apart, 6 squeezes, 6 of 6 ordered pairs feasible, "
+                          "best 1)")
+    s0, s1 = found.best.s
+    assert repr(found) == (f"Search(best quality {found.quality:.4g} at s = ({s0:.4g}, {s1:.4g}) m, angle 0 rad; "
+                           "1 start, 6 squeezes, 0 screened)")
     fig = plot_grasp_map(gmap, found)
     labels = fig.axes[0].get_legend_handles_labels()[1]
     assert "undone steps" in labels and "search" in labels

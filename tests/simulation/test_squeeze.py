@@ -416,6 +416,32 @@ def test_batch_lanes_report_an_infeasible_grip_and_an_overflow(slanted):
         assert eager.outcome == S(int(out.status[k])) and int(eager.count) == int(lane.count)
         np.testing.assert_allclose(lane.forces, eager.forces, rtol=0, atol=1e-10 * np.abs(eager.forces).max())
     assert int(out.stats.contacts[2]) > 4 and float(out.final_depth[2]) < 0.005
+    assert repr(out) == (f"SqueezeResult(batch of 3: SUCCESS 1, INFEASIBLE_GRIP 1, OVERFLOW 1; final depth 0 to "
+                         f"{float(np.max(out.final_depth)):.4g} m)")
+
+
+def test_a_result_a_scene_and_an_operator_print_in_one_line(slanted):
+    """A notebook cell ending in a result or a scene printed every array (31,000 characters for
+    a 16-node square, the meshes' nodes in a scene): now one line each, with what a reader
+    looks for first; traced, the sizes."""
+    res = jsq.squeeze(slanted)
+    kinds = sorted({k for _, _, k, _ in res.events.rows()})
+    count = {k: sum(row[2] == k for row in res.events.rows()) for k in kinds}
+    assert len(kinds) >= 2 and repr(res) == (
+        f"SqueezeResult(SUCCESS at depth {float(slanted.depth):.4g} m, {int(res.count)} rows, {len(res.events)} events "
+        f"({', '.join(f'{k} {count[k]}' for k in kinds)}), grip force {float(res.grip_force):.4g} N)")
+    mesh = slanted.mesh
+    assert repr(mesh) == f"Mesh({mesh.n} nodes, {len(mesh.triangles)} triangles, {mesh.m} boundary nodes in 1 loop, 0.1 × 0.1 m)"
+    assert repr(slanted).startswith(f"Scene(mesh={mesh!r}, material=Material(E=100000.0") and len(repr(slanted)) < 600
+    assert repr(slanted.operator()) == f"Compliance(sparse build, {mesh.m} boundary nodes, L = 0.1 m, float64, field map)"
+    seen = []
+
+    def traced(d):
+        out = jsq.squeeze(slanted.replace(depth=d))
+        seen.append(repr(out))
+        return out
+    shapes = jax.eval_shape(traced, float(slanted.depth))
+    assert seen == [f"SqueezeResult(traced, {shapes.forces.shape[0]} rows × {mesh.m} boundary nodes)"]
 
 
 def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monkeypatch):
