@@ -147,8 +147,10 @@ def precise(fun):
 
 def _top_level() -> bool:
     """No program is being staged around the call (inside ``jit`` even a new constant is a
-    tracer; under an eager ``vmap`` or ``jvp`` it is not)."""
-    return is_concrete(jnp.zeros(()))
+    tracer; under an eager ``vmap`` or ``jvp`` it is not). The probe's transfer is the
+    library's own, allowed under a caller's ``jax.transfer_guard``."""
+    with jax.transfer_guard("allow"):
+        return is_concrete(jnp.zeros(()))
 
 
 class TopLevelJit:

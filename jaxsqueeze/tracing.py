@@ -1,7 +1,9 @@
-"""Is a value a concrete array or a tracer inside ``jit``/``vmap``/``jvp``? And which frame is
-the user's (for a warning's ``stacklevel``)? (the base layer)"""
+"""Is a value a concrete array or a tracer inside ``jit``/``vmap``/``jvp``? Which frame is the
+user's (for a warning's ``stacklevel``)? And the library's own host ↔ device transfers, allowed
+under a caller's ``jax.transfer_guard``. (the base layer)"""
 from __future__ import annotations
 
+import functools
 import sys
 
 import jax
@@ -11,6 +13,18 @@ import numpy as np
 def is_concrete(x) -> bool:
     """True unless ``x`` (or any leaf of it) is a JAX tracer, i.e. eager validation can read it."""
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(x))
+
+
+def own_transfers(fun):
+    """``fun`` with the host ↔ device transfers it makes allowed under a caller's
+    ``jax.transfer_guard``: an eager call takes host numbers (a scene's floats, a mesh's
+    numpy arrays) into compiled programs and returns host arrays, by design. The guard keeps
+    watching the caller's own code."""
+    @functools.wraps(fun)
+    def allowed(*args, **kwargs):
+        with jax.transfer_guard("allow"):
+            return fun(*args, **kwargs)
+    return allowed
 
 
 def caller_level() -> int:

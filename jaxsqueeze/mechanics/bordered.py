@@ -10,7 +10,7 @@ import numpy as np
 from ..compiler import precise
 from ..geometry import boundary
 from ..numbers import real_array
-from ..tracing import is_concrete
+from ..tracing import is_concrete, own_transfers
 from .operator import Compliance, field_displacement
 
 
@@ -76,6 +76,7 @@ def slot_dofs(slots: jax.Array) -> jax.Array:
     return jnp.stack([2 * slots, 2 * slots + 1], axis=-1).reshape(-1)
 
 
+@own_transfers
 def deform(op: Compliance, nodes, displacements) -> Deformation:
     """Deformation from prescribed displacements of s ≥ 2 boundary nodes (Section III, eq. 4).
 

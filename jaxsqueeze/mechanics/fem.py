@@ -20,7 +20,7 @@ from .material import Material, checked
 from ..compiler import precise
 from ..geometry.mesh import Mesh
 from ..numbers import real_array
-from ..tracing import as_array, is_concrete
+from ..tracing import as_array, is_concrete, own_transfers
 from .operator import Compliance, FieldMap, rigid_modes
 
 METHODS = ("sparse", "dense", "spectral")
@@ -78,6 +78,7 @@ def _stress(points, triangles, u, nu):
     return jax.vmap(_corner_stress, in_axes=(0, 0, None))(points[triangles], u[triangles], nu)
 
 
+@own_transfers
 def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
     """Plane stress of every triangle (t, 3) = (σ_xx, σ_yy, τ_xy) [Pa] for nodal displacements
     ``displacement`` (n, 2) [m], e.g. ``result.displacement`` or
@@ -101,6 +102,7 @@ def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
     return jnp.asarray(material.E, sig.dtype) * sig
 
 
+@own_transfers
 def von_mises(stress) -> jax.Array:
     """Von Mises equivalent stress [Pa] of plane stresses (..., 3) = (σ_xx, σ_yy, τ_xy), σ_zz = 0:
     √(σ_xx² − σ_xx σ_yy + σ_yy² + 3 τ_xy²), with derivative 0 (not NaN) where the stress is 0,

@@ -43,7 +43,7 @@ from ..geometry.mesh import Mesh
 from ..numbers import positive, real_array
 from ..simulation.laws import FREE
 from ..simulation.result import SqueezeResult, norm
-from ..tracing import is_concrete
+from ..tracing import is_concrete, own_transfers
 
 
 def _check_result(res, name: str):
@@ -62,6 +62,7 @@ def per_result(fn):
     whole = jax.jit(precise(fn))
 
     @functools.wraps(fn)
+    @own_transfers
     def wrapped(res):
         _check_result(res, fn.__name__)
         return jax.vmap(whole)(res) if jnp.ndim(res.depth) == 2 else whole(res)
@@ -101,6 +102,7 @@ def _softmax(x, tau):
     return big + tau * jnp.log(jnp.sum(jnp.exp((x - big) / tau)))
 
 
+@own_transfers
 def slip_margin(res: SqueezeResult, friction, tau: float = 0.01, scene=None):
     """() smooth slip margin of the grasp at its last squeeze row (see module docstring); (B,)
     for a batched result.

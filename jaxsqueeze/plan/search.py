@@ -30,7 +30,7 @@ from ..simulation import validate
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
 from ..simulation.status import Status
-from ..tracing import caller_level, numeric
+from ..tracing import caller_level, numeric, own_transfers
 from .quality import adversary_work, grip_force, slip_margin, squeeze_work
 
 
@@ -251,6 +251,7 @@ def _evaluate_part(scene: Scene, quality, op, X) -> Summary:
         return evaluate(scene, X, quality, op=op, batch="loop", progress=False)
 
 
+@own_transfers
 def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "auto", chunk: int | None = None,
              progress: bool = True, processes: int | None = None, cache=True) -> Summary:
     """Summaries of candidates ``X`` (B, 3) = (s_0 [m], s_1 [m], angle [rad]) as numpy arrays (B,)
@@ -416,6 +417,7 @@ def _pairs(n: int, ordered: bool):
     return np.nonzero(~np.eye(n, dtype=bool)) if ordered else np.triu_indices(n, 1)
 
 
+@own_transfers
 def grasp_map(scene: Scene, quality="squeeze_work", spacing=None, angle: float = 0.0, op=None,
               batch: str = "auto", chunk: int | None = None, progress: bool = True, keep: int = 8,
               processes: int | None = None) -> GraspMap:
@@ -550,6 +552,7 @@ def check_search(optimizer, steps, starts, budget, init) -> None:
         candidates(init, "init")
 
 
+@own_transfers
 def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimizer=None, steps: int = 40,
                        starts: int = 5, coarse_spacing=None, vary_angle: bool = False, op=None,
                        progress: bool = True, budget: int | None = None) -> Search:

@@ -19,7 +19,7 @@ from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..tracing import as_array, differentiated, forward_levels, is_concrete, reverse_mode
+from ..tracing import as_array, differentiated, forward_levels, is_concrete, own_transfers, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement
 from ..geometry.mesh import Mesh
 from .scene import EVENTS, LOG_GROWTH, STEPS, Scene, stiffness_of
@@ -355,6 +355,7 @@ def _run(op: Compliance, grasp: Grasp, cfg: Config):
     return to_result(st, op, grasp), st.F.reshape(-1), st.g
 
 
+@own_transfers
 def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, trim: bool = True,
             history: bool = True) -> SqueezeResult:
     """Follow a two-finger squeeze from first touch to the target depth (Section IV).

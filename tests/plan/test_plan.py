@@ -195,7 +195,10 @@ def test_a_rebuilt_equal_scene_reuses_the_compiled_map(ellipse):
     P = float(ellipse.curve().perimeter)
     first = plan.evaluate(ellipse, [[0.0, P / 2]], batch="loop", progress=False)
     n = search._one._cache_size()
-    other = plan.evaluate(ellipse.replace(mesh=again), [[0.0, P / 2]], batch="loop", progress=False)
+    with jax.transfer_guard("disallow"):         # README, "Your JAX settings": maps run under a guard
+        other = plan.evaluate(ellipse.replace(mesh=again), [[0.0, P / 2]], batch="loop", progress=False)
+        gmap = jsq.grasp_map(ellipse, spacing=P / 4, progress=False)
+    assert gmap.evaluations == 6 and gmap.feasible().any()
     assert search._one._cache_size() == n and other.quality[0] == first.quality[0]
 
 
@@ -916,7 +919,7 @@ def test_a_search_history_records_undone_steps_once(ellipse):
     from jaxsqueeze.plan import search
     compiled = search._value_and_grad._cache_size()
     notebook = _kernel_stream()                  # and a notebook shows where the search is
-    with contextlib.redirect_stderr(notebook):
+    with contextlib.redirect_stderr(notebook), jax.transfer_guard("disallow"):     # (README: under a guard)
         other = jsq.optimize_placement(ellipse.replace(friction=0.6, depth=0.005, fingers=jsq.Fingers(radius=0.012)),
                                        "grip_force", init=[[0.01, P / 2]], optimizer=optax.adam(0.05), steps=2)
     assert other.squeezes == 3 and search._value_and_grad._cache_size() == compiled

@@ -420,6 +420,32 @@ def test_batch_lanes_report_an_infeasible_grip_and_an_overflow(slanted):
                          f"{float(np.max(out.final_depth)):.4g} m)")
 
 
+def test_eager_functions_run_under_a_transfer_guard(slanted, tmp_path):
+    """README, "Your JAX settings": under jax.transfer_guard("disallow") a squeeze, deform,
+    stresses, qualities, plots and ParaView files take host numbers in and give host arrays
+    back (a squeeze stopped at its first compiled call: the scene's floats are host values)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from jaxsqueeze.plan import quality
+    base = jsq.squeeze(slanted)
+    with jax.transfer_guard("disallow"):
+        res = jsq.squeeze(slanted)
+        u = np.zeros((2, 2))
+        u[1, 1] = -0.001
+        forces = jsq.deform(slanted.operator(), list(slanted.grip), u).forces
+        stress = jsq.fem.von_mises(jsq.fem.element_stress(slanted.mesh, slanted.material, res.displacement))
+        qualities = [float(q(res)) for q in (quality.squeeze_work, quality.grip_force)]
+        margin = float(quality.slip_margin(res, slanted.friction))
+        jsq.plots.plot_deformed(res, slanted)
+        jsq.export.write_final_vtu(str(tmp_path / "final.vtu"), res, slanted)
+        with pytest.raises(jax.errors.JaxRuntimeError, match="Disallowed host-to-device transfer"):     # the guard still watches
+            jnp.asarray(1.0) + np.ones(2)
+    np.testing.assert_array_equal(res.forces, base.forces)
+    assert np.all(np.isfinite(np.asarray(forces))) and np.all(np.asarray(stress) >= 0)
+    assert qualities == [float(quality.squeeze_work(base)), float(base.grip_force)] and margin > 0
+    assert (tmp_path / "final.vtu").stat().st_size > 0
+
+
 def test_a_result_a_scene_and_an_operator_print_in_one_line(slanted):
     """A notebook cell ending in a result or a scene printed every array (31,000 characters for
     a 16-node square, the meshes' nodes in a scene): now one line each, with what a reader
