@@ -84,7 +84,7 @@ from ..geometry.boundary import crossing
 from ..geometry.curves import arclength_params
 from ..geometry.mesh import ByContent
 from ..numbers import gib, positive, real_array
-from ..tracing import as_array, caller_level
+from ..tracing import as_array, caller_level, own_transfers
 from .operator import Compliance, FieldMap, rigid_modes
 
 NQ = 5                                                  # Gauss points per element
@@ -505,6 +505,7 @@ def _check_roundoff(band: Band, roundoff: float) -> None:
     warnings.warn(f"{what}; {fix}", stacklevel=caller_level())
 
 
+@own_transfers
 def band_compliance(band: Band, E: float, dtype=None) -> Compliance:
     """Compliance operator (method "band") of ``band`` with Young's modulus ``E`` [Pa].
 

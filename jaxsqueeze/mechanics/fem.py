@@ -147,6 +147,7 @@ def _coo(triangles):
 
 
 # ----------------------------------------------------------------------------- stiffness
+@own_transfers
 def stiffness(mesh: Mesh, material: Material) -> jsparse.BCOO:
     """Global stiffness K (2n, 2n) [N/m] as a BCOO matrix, DOFs interleaved x0, y0, x1, ...
 
@@ -168,6 +169,7 @@ def null_space(points) -> jax.Array:
     return w / jnp.linalg.norm(w, axis=0, keepdims=True)
 
 
+@own_transfers
 def scipy_stiffness(mesh: Mesh, nu) -> sp.csc_matrix:
     """The stiffness matrix K (2n, 2n) as a scipy CSC matrix in float64 (the host-side build).
 
@@ -201,6 +203,7 @@ def pinned_dofs(points_b: np.ndarray) -> np.ndarray:
     return np.array([0, 1, 2 * far + (1 if along_x else 0)])
 
 
+@own_transfers
 def compliance(mesh: Mesh, material: Material, method: str = "sparse") -> Compliance:
     """Boundary compliance operator of a solid mesh (DESIGN 2.2), in scaled units.
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..mechanics.fem import METHODS
 from ..mechanics.material import Material
-from ..tracing import as_array, is_concrete, numeric
+from ..tracing import as_array, is_concrete, numeric, own_transfers
 from .laws import CONTACT_MODELS, FRICTION_MODELS
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
@@ -394,6 +394,7 @@ class Scene:
         """Boundary node nearest to the point ``xy`` (2,) given in the user's frame [m]."""
         return nearest_boundary_node(self.mesh, xy)
 
+    @own_transfers
     def operator(self) -> Compliance:
         """The compliance operator of the object (see :func:`compliance_of`).
 

@@ -421,8 +421,8 @@ def test_batch_lanes_report_an_infeasible_grip_and_an_overflow(slanted):
 
 
 def test_eager_functions_run_under_a_transfer_guard(slanted, tmp_path):
-    """README, "Your JAX settings": under jax.transfer_guard("disallow") a squeeze, deform,
-    stresses, qualities, plots and ParaView files take host numbers in and give host arrays
+    """README, "Your JAX settings": under jax.transfer_guard("disallow") a squeeze, operator
+    builds, deform, stresses, qualities, plots and ParaView files take host numbers in and give host arrays
     back (a squeeze stopped at its first compiled call: the scene's floats are host values)."""
     import matplotlib
     matplotlib.use("Agg")
@@ -430,6 +430,8 @@ def test_eager_functions_run_under_a_transfer_guard(slanted, tmp_path):
     base = jsq.squeeze(slanted)
     with jax.transfer_guard("disallow"):
         res = jsq.squeeze(slanted)
+        built = jsq.fem.compliance(slanted.mesh, jsq.Material(2e5, 0.25, 0.01))
+        assert jsq.fem.stiffness(slanted.mesh, slanted.material).shape == (2 * slanted.mesh.n,) * 2
         u = np.zeros((2, 2))
         u[1, 1] = -0.001
         forces = jsq.deform(slanted.operator(), list(slanted.grip), u).forces
@@ -443,7 +445,7 @@ def test_eager_functions_run_under_a_transfer_guard(slanted, tmp_path):
     np.testing.assert_array_equal(res.forces, base.forces)
     assert np.all(np.isfinite(np.asarray(forces))) and np.all(np.asarray(stress) >= 0)
     assert qualities == [float(quality.squeeze_work(base)), float(base.grip_force)] and margin > 0
-    assert (tmp_path / "final.vtu").stat().st_size > 0
+    assert (tmp_path / "final.vtu").stat().st_size > 0 and built.m == slanted.mesh.m
 
 
 def test_a_result_a_scene_and_an_operator_print_in_one_line(slanted):
