@@ -164,7 +164,8 @@ def main(argv=None) -> int:
     try:
         args = _parser().parse_args(argv)
         scene_path = getattr(args, "scene", None) or "<demo scene>"
-        return _main(args)
+        from ..tracing import own_transfers       # every transfer of the program is the library's own
+        return own_transfers(_main)(args)
     except (KeyboardInterrupt, _Interrupted):
         print("jaxsqueeze: interrupted; no new outputs were written", file=sys.stderr)
         return 130

@@ -525,6 +525,7 @@ def unit_step(optimizer) -> np.ndarray:
         return np.asarray(optimizer.update(jnp.ones(3), optimizer.init(u), u)[0])
 
 
+@own_transfers
 def check_search(optimizer, steps, starts, budget, init) -> None:
     """ValueError/TypeError for arguments :func:`optimize_placement` cannot use, before any squeeze."""
     _check_count("steps", steps, 0)

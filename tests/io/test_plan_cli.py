@@ -1,6 +1,7 @@
 """``jaxsqueeze plan SCENE.toml --out DIR``: map, search, best grasp, summary; [plan] errors."""
 import json
 
+import jax
 import pytest
 
 from jaxsqueeze.io import cli
@@ -42,7 +43,8 @@ def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys):
     path = tmp_path / "scene.toml"
     path.write_text(SCENE)
     out = tmp_path / "plan"
-    code = cli.main(["plan", str(path), "--out", str(out), "-q"])
+    with jax.transfer_guard("disallow"):    # (JAX_TRANSFER_GUARD=disallow: every transfer is the program's own)
+        code = cli.main(["plan", str(path), "--out", str(out), "-q"])
     assert code == 0, capsys.readouterr().err
     s = json.loads((out / "summary.json").read_text())
     assert s["quality"] == "adversary_work" and s["best"]["status"] == "SUCCESS"
