@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..mechanics.operator import Compliance
-from ..tracing import is_concrete
+from ..tracing import is_concrete, own_transfers
 from .engine import Stats
 from .laws import EVENT_KINDS
 from .status import Status
@@ -210,16 +210,19 @@ class SqueezeResult:
         return xp.take_along_axis(a, idx, axis=lead)[(slice(None),) * lead + (0,)]
 
     @property
+    @own_transfers
     def final_depth(self):
         """() depth reached [m] (batched: one per member)."""
         return self._last(self.depth)
 
     @property
+    @own_transfers
     def final_forces(self):
         """(m, 2) contact forces at the final row [N]."""
         return self._last(self.forces)
 
     @property
+    @own_transfers
     def finger_forces(self):
         """(k, F, 2) total force of every finger on the object [N], per row (F = 3 with an adversary)."""
         xp = self._xp
@@ -230,11 +233,13 @@ class SqueezeResult:
         return xp.stack([xp.sum(xp.where((on & (fg == k))[..., None], F, 0.0), axis=-2) for k in range(n)], -2)
 
     @property
+    @own_transfers
     def total_force(self):
         """(k, 2, 2) total force of each grasping finger (axis -2: finger 0, 1) on the object [N], per row."""
         return self.finger_forces[..., :2, :]
 
     @property
+    @own_transfers
     def grip_force(self):
         """() magnitude of the total force of the still finger at the final row [N]."""
         return norm(self._last(self.total_force)[..., 0, :], self._xp)

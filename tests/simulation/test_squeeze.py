@@ -403,7 +403,9 @@ def test_batch_lanes_report_an_infeasible_grip_and_an_overflow(slanted):
     normals (μ = 0.1 allows 5.7°); 4 slots hold the first 4.4 mm, then 6 contacts join."""
     small = slanted.replace(settings=jsq.Settings(capacity=4))
     mus, depths = jnp.array([0.23, 0.1, 0.23]), jnp.array([0.002, 0.002, 0.012])
-    out = jax.vmap(lambda mu, d: jsq.squeeze(small.replace(friction=mu, depth=d)))(mus, depths)
+    with jax.transfer_guard("disallow"):         # README, "Your JAX settings": an eager vmap too
+        out = jax.vmap(lambda mu, d: jsq.squeeze(small.replace(friction=mu, depth=d)))(mus, depths)
+        assert np.shape(out.final_depth) == np.shape(out.grip_force) == (3,)
     S = jsq.Status
     assert [S(int(v)) for v in out.status] == [S.SUCCESS, S.INFEASIBLE_GRIP, S.OVERFLOW]
     assert float(out.margin[1]) < 0 and float(out.final_depth[1]) == 0
