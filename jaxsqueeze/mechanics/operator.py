@@ -125,10 +125,16 @@ def field_displacement(op: Compliance, f_hat: jax.Array, g: jax.Array) -> jax.Ar
     if op.field is None:
         raise ValueError("this compliance operator carries no field map; rebuild it with the default options")
     if is_concrete((f_hat, g)) and np.ndim(f_hat) == 1:   # eager: the host solve (a callback compiles per call)
-        fmap = op.field
-        u = fmap.solve(np.asarray(f_hat, np.float64)) + rigid_modes(fmap.points, xp=np) @ np.asarray(g, np.float64)
-        return as_array(u.reshape(-1, 2), jnp.result_type(f_hat))
+        return as_array(field_on_host(op, f_hat, g), jnp.result_type(f_hat))
     return _field(op.field, f_hat, g)
+
+
+def field_on_host(op: Compliance, f_hat, g) -> np.ndarray:
+    """:func:`field_displacement` of one concrete solve as a numpy array (n, 2) of the forces'
+    precision, for callers that want it on the host (an eager squeeze's trimmed result)."""
+    fmap = op.field
+    u = fmap.solve(np.asarray(f_hat, np.float64)) + rigid_modes(fmap.points, xp=np) @ np.asarray(g, np.float64)
+    return u.reshape(-1, 2).astype(np.dtype(jnp.result_type(f_hat)), copy=False)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))

@@ -20,7 +20,7 @@ from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
 from ..tracing import as_array, differentiated, forward_levels, is_concrete, own_transfers, reverse_mode
-from ..mechanics.operator import Compliance, field_displacement
+from ..mechanics.operator import Compliance, field_displacement, field_on_host
 from ..geometry.mesh import Mesh
 from .scene import EVENTS, LOG_GROWTH, STEPS, Scene, stiffness_of
 from .status import Status
@@ -424,8 +424,11 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         if inside:
             warnings.warn(inside, stacklevel=2)
     if op.field is not None:
-        u = field_displacement(op, F_hat, g_hat)
-        u = as_array(np.asarray(u) * np.asarray(op.length), u.dtype) if is_concrete(u) else u * op.length
+        if is_concrete((F_hat, g_hat)) and np.ndim(F_hat) == 1:    # one eager squeeze: solved and kept on the host
+            u = field_on_host(op, F_hat, g_hat) * np.asarray(op.length, np.dtype(F_hat.dtype))
+            u = u if trim else as_array(u)
+        else:
+            u = field_displacement(op, F_hat, g_hat) * op.length
         res = dataclasses.replace(res, displacement=u)
         if concrete and np.ndim(res.count) == 0 and isinstance(scene.mesh, Mesh):
             flipped = validate.inverted_warning(scene.mesh.points, scene.mesh.triangles, u, float(res.final_depth))

@@ -733,16 +733,19 @@ def inside_tip_warning(res, points, tol: float, contact: str = "segment") -> str
     contacts event A keeps free nodes out (to 10 ``gap_tol``: the
     ``engine.SUNK_TOLS`` that the caller's ``tol`` is)."""
     k = int(res.count)                                  # (rows past it are padding in an untrimmed result)
-    modes, fg = np.asarray(res.modes)[:k], np.asarray(res.finger)[:k].astype(int)
+    modes, fg = np.asarray(res.modes)[:k], np.asarray(res.finger)[:k]
     x = np.asarray(points, float)[None] + np.asarray(res.boundary_displacement, float)[:k]     # (k, m, 2)
-    C, r = np.asarray(res.centres, float)[:k, None, :2], float(res.radius)
-    inside = r - np.linalg.norm(x[:, :, None] - C, axis=-1)                                   # (k, m, 2) [m]
-    own = (modes > 0)[..., None] & (fg[..., None] == np.arange(2))
-    held = own.any(axis=1).all(axis=1)[:, None, None]   # (a LOST_CONTACT's last row: the object let go)
-    inside = np.where(own | ~held | np.isnan(inside), -np.inf, inside)
-    bad = inside > tol
+    C, r = np.asarray(res.centres, float)[:k, None, :2], float(res.radius)                    # (k, 1, 2, 2)
+    dx, dy = x[:, :, None, 0] - C[..., 0], x[:, :, None, 1] - C[..., 1]
+    dist2 = dx * dx + dy * dy                           # (k, m, 2) [m²]: node to tip centre, squared
+    on = modes > 0
+    own = np.stack([on & (fg == 0), on & (fg == 1)], axis=-1)
+    held = (own[..., 0].any(axis=1) & own[..., 1].any(axis=1))[:, None, None]   # (a LOST_CONTACT's last row: let go)
+    reach = r - tol                                     # more than tol inside: nearer than r - tol (NaN: never)
+    bad = (dist2 < reach * reach) & (reach > 0) & ~own & held
     if not bad.any():
         return None
+    inside = np.where(~own & held & ~np.isnan(dist2), r - np.sqrt(dist2), -np.inf)           # (k, m, 2) [m]
     i = int(np.argmax(bad.any(axis=(1, 2))))
     pos, tip = np.unravel_index(int(np.argmax(np.where(bad[i], inside[i], -np.inf))), bad[i].shape)
     node, deepest = int(np.asarray(res.nodes)[pos]), float(np.max(inside))
