@@ -408,6 +408,8 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         cfg = bigger
         res, F_hat, g_hat = _run(dataclasses.replace(op, field=None), grasp, cfg)
     if concrete and np.ndim(res.status) == 0:
+        if trim:                            # numpy, as the trimmed result will be: the checks below read it there
+            res = jax.tree.map(np.asarray, res)
         a, b = np.asarray(op.points)[boundary.positions(op.nodes, res.grip)] * float(op.length)
         between, depth = float(np.linalg.norm(a - b)), float(scene.depth)
         if scene.placement is not None and int(res.status) == Status.INVALID_INPUT:
