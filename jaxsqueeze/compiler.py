@@ -65,7 +65,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .tracing import is_concrete
+from .tracing import is_concrete, own_transfers
 
 #: keep XNNPACK/YNNPACK custom fusions out of the program (a one-kernel region cannot hold
 #: them; the other programs run as fast without them)
@@ -145,12 +145,11 @@ def precise(fun):
     return traced
 
 
+@own_transfers                     # (the probe's constant, under a caller's jax.transfer_guard)
 def _top_level() -> bool:
     """No program is being staged around the call (inside ``jit`` even a new constant is a
-    tracer; under an eager ``vmap`` or ``jvp`` it is not). The probe's transfer is the
-    library's own, allowed under a caller's ``jax.transfer_guard``."""
-    with jax.transfer_guard("allow"):
-        return is_concrete(jnp.zeros(()))
+    tracer; under an eager ``vmap`` or ``jvp`` it is not)."""
+    return is_concrete(jnp.zeros(()))
 
 
 class TopLevelJit:
