@@ -176,8 +176,9 @@ class SqueezeResult:
                     + f"; final depth {d.min():.4g} to {d.max():.4g} m")
         kinds = collections.Counter(EVENT_KINDS[int(k)] for k in np.asarray(self.events.kind)[:int(self.n_events)])
         events = ", ".join(f"{k} {kinds[k]}" for k in sorted(kinds))
-        said = (f"{self.outcome.name} at depth {float(self.final_depth):.4g} m, {int(self.count)} rows, "
-                f"{int(self.n_events)} events{f' ({events})' if events else ''}, grip force {float(self.grip_force):.4g} N")
+        rows, n = int(self.count), int(self.n_events)
+        said = (f"{self.outcome.name} at depth {float(self.final_depth):.4g} m, {rows} row{'s' * (rows != 1)}, "
+                f"{n} event{'s' * (n != 1)}{f' ({events})' if events else ''}, grip force {float(self.grip_force):.4g} N")
         push = float(self._last(self.push))
         return said + (f", pushed {push:.4g} m" if push > 0 else "")
 

@@ -420,6 +420,7 @@ def test_batch_lanes_report_an_infeasible_grip_and_an_overflow(slanted):
     assert int(out.stats.contacts[2]) > 4 and float(out.final_depth[2]) < 0.005
     assert repr(out) == (f"SqueezeResult(batch of 3: SUCCESS 1, INFEASIBLE_GRIP 1, OVERFLOW 1; final depth 0 to "
                          f"{float(np.max(out.final_depth)):.4g} m)")
+    assert repr(jax.tree.map(lambda a: a[1], out)) == "SqueezeResult(INFEASIBLE_GRIP at depth 0 m, 1 row, 0 events, grip force 0 N)"
 
 
 def test_eager_functions_run_under_a_transfer_guard(slanted, tmp_path):
