@@ -78,6 +78,15 @@ def _stress(points, triangles, u, nu):
     return jax.vmap(_corner_stress, in_axes=(0, 0, None))(points[triangles], u[triangles], nu)
 
 
+def _real(x, what: str, unit: str) -> jax.Array:
+    """``x`` as a JAX array of real numbers: checked when concrete (no booleans, complex numbers
+    or text), integers as the default float type."""
+    if is_concrete(x):
+        real_array(x, what, unit)
+    x = jnp.asarray(x)
+    return x.astype(jnp.asarray(0.0).dtype) if jnp.issubdtype(x.dtype, jnp.integer) else x
+
+
 @own_transfers
 def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
     """Plane stress of every triangle (t, 3) = (σ_xx, σ_yy, τ_xy) [Pa] for nodal displacements
@@ -89,11 +98,7 @@ def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
     the displacement and the material: ``jax.jit`` (with the mesh static), ``vmap``, ``jvp``
     and ``grad`` apply."""
     checked(material)
-    if is_concrete(displacement):
-        real_array(displacement, "displacement", "m")
-    u = jnp.asarray(displacement)
-    if jnp.issubdtype(u.dtype, jnp.integer):       # whole metres: the mesh's points must not round
-        u = u.astype(jnp.asarray(0.0).dtype)
+    u = _real(displacement, "displacement", "m")     # (whole metres: the mesh's points must not round)
     if u.shape != (mesh.n, 2):
         raise ValueError(f"displacement must be (n, 2) = {(mesh.n, 2)} nodal displacements [m] of the mesh, "
                          f"got shape {u.shape}")
@@ -108,11 +113,7 @@ def von_mises(stress) -> jax.Array:
     √(σ_xx² − σ_xx σ_yy + σ_yy² + 3 τ_xy²), with derivative 0 (not NaN) where the stress is 0,
     as for the other norms a search may differentiate (an unloaded triangle, a grip that never
     started)."""
-    if is_concrete(stress):
-        real_array(stress, "stress", "Pa")
-    stress = jnp.asarray(stress)
-    if jnp.issubdtype(stress.dtype, jnp.integer):
-        stress = stress.astype(jnp.asarray(0.0).dtype)
+    stress = _real(stress, "stress", "Pa")
     if stress.ndim < 1 or stress.shape[-1] != 3:
         raise ValueError(f"stress must be plane stresses (..., 3) = (σ_xx, σ_yy, τ_xy) [Pa], e.g. from "
                          f"element_stress; got shape {stress.shape}")
