@@ -56,6 +56,26 @@ class EventLog(NamedTuple):
     def __len__(self):
         return int(np.shape(self.depth)[0])
 
+    def __repr__(self) -> str:
+        """One line: the valid events by kind and the depths they span (``rows()`` lists them);
+        a batch's or a traced log's shape."""
+        try:
+            if not is_concrete(tuple(self)):
+                return f"EventLog(traced, {np.shape(self.depth)[-1]} slots)"
+            if np.ndim(self.depth) != 1:
+                return f"EventLog(batch of {np.shape(self.depth)[0]} logs × {np.shape(self.depth)[-1]} slots)"
+            valid = np.asarray(self.kind) >= 0
+            kinds = collections.Counter(EVENT_KINDS[int(k)] for k in np.asarray(self.kind)[valid])
+            depth = np.asarray(self.depth)[valid]
+            n = int(valid.sum())
+            said = f"{n} event{'s' * (n != 1)}"
+            if n:
+                said += (" (" + ", ".join(f"{k} {kinds[k]}" for k in sorted(kinds)) + f") at depths "
+                         f"{depth.min():.4g} to {depth.max():.4g} m; .rows() lists them")
+            return f"EventLog({said})"
+        except Exception:  # noqa: BLE001  (a repr must not raise)
+            return f"EventLog(depth of shape {np.shape(self.depth)})"
+
     def rows(self):
         """List of (depth [m], node, 'A'..'D', finger 0|1|2) for printing, the valid events
         only (a padded log's padding is left out); one squeeze's log, not a batch's."""

@@ -421,6 +421,8 @@ def test_batch_lanes_report_an_infeasible_grip_and_an_overflow(slanted):
     assert repr(out) == (f"SqueezeResult(batch of 3: SUCCESS 1, INFEASIBLE_GRIP 1, OVERFLOW 1; final depth 0 to "
                          f"{float(np.max(out.final_depth)):.4g} m)")
     assert repr(jax.tree.map(lambda a: a[1], out)) == "SqueezeResult(INFEASIBLE_GRIP at depth 0 m, 1 row, 0 events, grip force 0 N)"
+    assert repr(out.events) == f"EventLog(batch of 3 logs × {out.events.depth.shape[1]} slots)"
+    assert repr(jax.tree.map(lambda a: a[1], out).events) == "EventLog(0 events)"     # padding is not an event
 
 
 def test_eager_functions_run_under_a_transfer_guard(slanted, tmp_path):
@@ -461,6 +463,9 @@ def test_a_result_a_scene_and_an_operator_print_in_one_line(slanted):
     assert len(kinds) >= 2 and repr(res) == (
         f"SqueezeResult(SUCCESS at depth {float(slanted.depth):.4g} m, {int(res.count)} rows, {len(res.events)} events "
         f"({', '.join(f'{k} {count[k]}' for k in kinds)}), grip force {float(res.grip_force):.4g} N)")
+    depths = [d for d, *_ in res.events.rows()]
+    assert repr(res.events) == (f"EventLog({len(res.events)} events ({', '.join(f'{k} {count[k]}' for k in kinds)}) at "
+                                f"depths {min(depths):.4g} to {max(depths):.4g} m; .rows() lists them)")
     mesh = slanted.mesh
     assert repr(mesh) == f"Mesh({mesh.n} nodes, {len(mesh.triangles)} triangles, {mesh.m} boundary nodes in 1 loop, 0.1 × 0.1 m)"
     assert repr(slanted).startswith(f"Scene(mesh={mesh!r}, material=Material(E=100000.0") and len(repr(slanted)) < 600
@@ -469,10 +474,11 @@ def test_a_result_a_scene_and_an_operator_print_in_one_line(slanted):
 
     def traced(d):
         out = jsq.squeeze(slanted.replace(depth=d))
-        seen.append(repr(out))
+        seen.extend([repr(out), repr(out.events)])
         return out
     shapes = jax.eval_shape(traced, float(slanted.depth))
-    assert seen == [f"SqueezeResult(traced, {shapes.forces.shape[0]} rows × {mesh.m} boundary nodes)"]
+    assert seen == [f"SqueezeResult(traced, {shapes.forces.shape[0]} rows × {mesh.m} boundary nodes)",
+                    f"EventLog(traced, {shapes.events.depth.shape[0]} slots)"]
 
 
 def test_automatic_capacities_grow_on_overflow_to_the_same_result(slanted, monkeypatch):
