@@ -21,6 +21,15 @@ def real_array(x, what: str, unit: str = "") -> np.ndarray:
     return a.astype(np.float64)
 
 
+def kind(x) -> str:
+    """NumPy's dtype kind of ``np.asarray(x)`` ("f", "i", "b", "U", ...), or "O" when ``x``
+    cannot be made an array (lists of unequal lengths: NumPy raises on them)."""
+    try:
+        return np.asarray(x).dtype.kind
+    except (TypeError, ValueError):
+        return "O"
+
+
 def _holds_bool(x) -> bool:
     """Whether a (nested) list or tuple holds a Python or NumPy boolean."""
     if isinstance(x, (bool, np.bool_)):

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..compiler import precise
 from ..geometry import boundary
-from ..numbers import real_array
+from ..numbers import kind, real_array
 from ..tracing import is_concrete, own_transfers
 from .operator import Compliance, field_displacement
 
@@ -87,8 +87,9 @@ def deform(op: Compliance, nodes, displacements) -> Deformation:
     Returns:
         :class:`Deformation` with forces [N], g, and the displacement of every node [m].
     """
-    if np.ndim(nodes) != 1:
-        raise ValueError(f"nodes must be a flat list of s boundary node indices, got shape {np.shape(nodes)}")
+    if kind(nodes) == "O" or np.ndim(nodes) != 1:
+        got = f"{nodes!r:.80}" if kind(nodes) == "O" else f"shape {np.shape(nodes)}"
+        raise ValueError(f"nodes must be a flat list of s boundary node indices, got {got}")
     if is_concrete(displacements):
         real_array(displacements, "displacements", "m")
     slots = boundary_slots(op, nodes)

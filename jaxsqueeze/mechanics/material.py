@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
+from ..numbers import kind
 from ..tracing import is_concrete, numeric
 
 
@@ -53,7 +54,7 @@ def checked(material: Material) -> Material:
         v = getattr(material, name)
         if not is_concrete(v):
             continue
-        if v is None or isinstance(v, (str, bytes, bool, np.bool_)) or np.asarray(v).dtype.kind not in "iuf":
+        if v is None or isinstance(v, (str, bytes, bool, np.bool_)) or kind(v) not in "iuf":
             raise ValueError(f"Material.{name} = {v!r:.80}: expected one real number [{unit}]")
         if np.ndim(v):
             raise ValueError(f"Material.{name} has shape {np.shape(v)}: one material takes one number; for many "

@@ -25,7 +25,7 @@ import numpy as np
 from .. import compiler
 from ..batch import interactive
 from ..geometry.mesh import Mesh
-from ..numbers import real_array
+from ..numbers import kind, real_array
 from ..simulation import validate
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
@@ -77,7 +77,7 @@ def _check_count(name, v, least) -> None:
 
 def _check_angle(angle) -> float:
     """The squeeze-direction offset as a float, or ValueError (a finite number [rad])."""
-    ok = not isinstance(angle, (str, bytes, bool)) and np.ndim(angle) == 0
+    ok = not isinstance(angle, (str, bytes, bool)) and kind(angle) != "O" and np.ndim(angle) == 0
     try:
         ok = ok and bool(np.isfinite(float(angle)))
     except (TypeError, ValueError):
@@ -386,7 +386,7 @@ def grid(scene: Scene, spacing=None) -> np.ndarray:
     m = scene.mesh.loops[0] if hasattr(scene.mesh, "loops") else scene.mesh.m
     if spacing is None:
         spacing = P / m
-    if isinstance(spacing, (str, bytes, bool)) or not (np.ndim(spacing) == 0 and np.isreal(spacing)
+    if isinstance(spacing, (str, bytes, bool)) or kind(spacing) == "O" or not (np.ndim(spacing) == 0 and np.isreal(spacing)
                                                        and np.isfinite(float(spacing)) and float(spacing) > 0):
         raise ValueError(f"spacing={spacing!r} must be a finite arc length > 0 m (the outer boundary is {P:.4g} m "
                          f"long; the default is its node spacing, {P / m:.3g} m).")

@@ -160,6 +160,7 @@ class State:
     missed: jax.Array           # () int: ADVANCE solves in a row at a predicted crossing that found none
     limit: jax.Array            # () the next ADVANCE solve goes no deeper (a dip seen in a step), else +inf
     d_ev: jax.Array             # () depth of the last row an event made (accepted in CHECK)
+    g_before: jax.Array         # (3,) g of the row recorded before the last (``Config.history`` off: :func:`let_go`)
 
 
 def _with(st: State, **kw) -> State:
@@ -215,7 +216,7 @@ def init(model: Model) -> State:
         count=i32(0), stats=Stats(*(i32(0),) * 5, zero, *(i32(0),) * 5), squeeze_status=i32(RUNNING),
         squeeze_events=i32(0),
         margin=model.margin, grip=model.grip, invalid=model.invalid, work=z(3, dt), ff=z((F, 2), dt), ff0=z((F, 2), dt),
-        missed=jnp.array(0, jnp.int32), limit=jnp.array(jnp.inf, dt), d_ev=zero)
+        missed=jnp.array(0, jnp.int32), limit=jnp.array(jnp.inf, dt), d_ev=zero, g_before=z(3, dt))
 
 
 # ----------------------------------------------------------------------------- one iteration
@@ -745,9 +746,11 @@ def _record(model: Model, st: State) -> State:
     push = jnp.where(model.phase == 0, 0.0, st.d)
     vals = (depth, ns.mode.astype(jnp.int8), ns.finger.astype(jnp.int8), st.angle, st.F, st.u,
             model.centres(st.d), model.angles(st.d), st.g, push)
+    g_before = st.g_before
     if model.cfg.history:
         hist = tuple(h.at[st.count].set(v) for h, v in zip(st.hist, vals))
     else:
+        g_before = st.hist[8][1]
         hist = tuple(h.at[1].set(v) for h, v in zip(st.hist, vals))
         hist = tuple(jnp.where(model.phase == 0, h.at[0].set(v), h) for h, v in zip(hist, vals))
     ff = _finger_totals(model, st.F, ns.mode, ns.finger)
@@ -758,7 +761,7 @@ def _record(model: Model, st: State) -> State:
         mid0 = 0.5 * (ff + st.ff) - st.ff0
         inc = jnp.stack([jnp.sum(mid[2] * dx), -jnp.sum(mid0[0] * dx), -jnp.sum(mid0[1] * dx)])
         work = work + jnp.where((model.phase == 1) & (st.count > 0), inc, 0.0)
-    return _with(st, hist=hist, ff=ff, work=work)
+    return _with(st, hist=hist, ff=ff, work=work, g_before=g_before)
 
 
 def finish(model: Model, st: State, ok) -> State:
@@ -857,17 +860,20 @@ def let_go(model: Model, st: State) -> State:
     from a singular solve when no contact is left to fix the object's rigid motion: its
     displacements are not finite. The object is let go: no forces, so no deformation, and the
     rigid motion of the row before (its boundary displacement is that rigid motion; none when
-    it lets go at the touch, row 0). Needs the row before (``Config.history``)."""
-    if not model.cfg.history:
-        return st
+    it lets go at the touch, row 0). With ``Config.history`` off the row before is
+    ``State.g_before``, and the let-go row is row 1 (and row 0 when the squeeze phase ended)."""
     depth, mode, finger, theta, F, u, C, alpha, g, push = st.hist
     k = st.count - 1
-    bad = (st.status == Status.LOST_CONTACT) & (k >= 0) & ~(jnp.all(jnp.isfinite(u[k])) & jnp.all(jnp.isfinite(g[k])))
-    g_k = jnp.where(bad, jnp.where(k >= 1, g[jnp.maximum(k - 1, 0)], 0.0), g[k])
-    u_k = jnp.where(bad, (model.op.N @ g_k).reshape(u[k].shape), u[k])
-    F_k = jnp.where(bad, jnp.zeros_like(F[k]), F[k])
-    hist = (depth, mode, finger, theta, F.at[k].set(F_k), u.at[k].set(u_k), C, alpha, g.at[k].set(g_k), push)
-    return _with(st, hist=hist, F=F_k, u=u_k, g=g_k)       # (the state is its last recorded row)
+    lost = (st.status == Status.LOST_CONTACT) & (k >= 0)
+    before = jnp.where(k >= 1, g[jnp.maximum(k - 1, 0)] if model.cfg.history else st.g_before, 0.0)
+    last = k if model.cfg.history else 1
+    for r in ((k,) if model.cfg.history else (0, 1)):
+        bad = lost & ~(jnp.all(jnp.isfinite(u[r])) & jnp.all(jnp.isfinite(g[r])))
+        g = g.at[r].set(jnp.where(bad, before, g[r]))
+        u = u.at[r].set(jnp.where(bad, (model.op.N @ before).reshape(u[r].shape), u[r]))
+        F = F.at[r].set(jnp.where(bad, jnp.zeros_like(F[r]), F[r]))
+    hist = (depth, mode, finger, theta, F, u, C, alpha, g, push)
+    return _with(st, hist=hist, F=F[last], u=u[last], g=g[last])       # (the state is its last recorded row)
 
 
 def simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:

@@ -11,7 +11,7 @@ import jax
 import numpy as np
 
 from ..mechanics.fem import METHODS
-from ..mechanics.material import Material
+from ..mechanics.material import Material, checked
 from ..tracing import as_array, is_concrete, numeric, own_transfers
 from .laws import CONTACT_MODELS, FRICTION_MODELS
 from ..geometry import boundary
@@ -429,6 +429,7 @@ def compliance_of(obj, material: Material, method: str = "sparse") -> Compliance
     """
     from ..mechanics.fem import compliance
 
+    checked(material)
     solid = isinstance(obj, Mesh)
     if not solid:
         from ..mechanics.band import Band

@@ -36,7 +36,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..numbers import gib
+from ..numbers import gib, kind
 
 FIELDS: tuple[str, ...] = (
     "material.E",
@@ -628,7 +628,7 @@ def shape_problems(scene) -> list[str]:
     for name, value in fields.items():
         if value is None and "." in name and name.split(".")[0] in ("settings", "adversary"):
             continue                                    # None: the default
-        if value is None or isinstance(value, (str, bytes)) or np.asarray(value).dtype.kind not in "iuf":
+        if value is None or isinstance(value, (str, bytes)) or kind(value) not in "iuf":
             band = name == "material.nu" and type(scene.mesh).__name__ == "Band"
             out.append(f"{name} = {value!r}: expected a number" + (
                 " (a band ignores nu, but a Material holds one: pass any valid value, e.g. nu=0.3)" if band else ""))
@@ -638,17 +638,16 @@ def shape_problems(scene) -> list[str]:
             out.append(f"{name} has shape {x.shape}: one squeeze takes a single number; for many values use "
                        "jax.vmap over the scene")
     if scene.grip is not None:
-        g = np.asarray(scene.grip) if not isinstance(scene.grip, (str, bytes)) else np.asarray([scene.grip])
-        if g.dtype.kind not in "iuf" or g.dtype == bool:
+        if isinstance(scene.grip, (str, bytes)) or kind(scene.grip) not in "iuf":
             out.append(f"grip = {scene.grip!r}: expected two integer node indices (e.g. from "
                        "Scene.nearest_boundary_node)")
-        elif g.ndim > 1:
-            out.append(f"grip has shape {g.shape}: one squeeze takes one grip (i, j); for many grips use "
+        elif np.ndim(scene.grip) > 1:
+            out.append(f"grip has shape {np.shape(scene.grip)}: one squeeze takes one grip (i, j); for many grips use "
                        "jax.vmap over the scene (or jsq.grasp_map)")
     if scene.placement is not None:
         for name in ("s", "angle"):
             v = getattr(scene.placement, name)
-            if isinstance(v, (str, bytes)) or np.asarray(v).dtype.kind not in "iuf":
+            if isinstance(v, (str, bytes)) or kind(v) not in "iuf":
                 out.append(f"placement.{name} = {v!r}: expected " + ("two arc lengths [m]" if name == "s" else
                                                                        "a number [rad]"))
                 return out

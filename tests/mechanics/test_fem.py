@@ -578,6 +578,8 @@ def test_deform_errors():
             jsq.deform(op, b[:2], bad)
     with pytest.raises(ValueError, match=r"flat list of s boundary node indices, got shape \(1, 2\)"):
         jsq.deform(op, [b[:2]], np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=r"flat list of s boundary node indices, got \[1, \[2, 3\]\]"):
+        jsq.deform(op, [1, [2, 3]], np.zeros((2, 2)))
 
 
 @pytest.mark.parametrize("kwargs, field", [
@@ -598,6 +600,7 @@ def test_material_validation(kwargs, field):
     ("E", "1e5", "= '1e5': expected one real number [Pa]"), ("E", True, "= True: expected one real number [Pa]"),
     ("nu", 0.3 + 0.1j, "= (0.3+0.1j): expected one real number [-]"), ("thickness", None, "= None: expected one real"),
     ("E", [1e5, 2e5], "has shape (2,): one material takes one number"),
+    ("nu", [0.3, [0.2]], "= [0.3, [0.2]]: expected one real number [-]"),      # (NumPy's own ragged-list error)
 ])
 def test_fem_functions_refuse_a_material_that_is_not_numbers(field, value, says):
     """A Material holds anything (JAX rebuilds pytrees with placeholders and masks), so the
@@ -607,7 +610,8 @@ def test_fem_functions_refuse_a_material_that_is_not_numbers(field, value, says)
     mesh = mesh_of("rectangle", 0.05)
     mat = Material(**{**dict(E=1e5, nu=0.3, thickness=0.01), field: value})
     for call in (lambda: fem.stiffness(mesh, mat), lambda: fem.compliance(mesh, mat),
-                 lambda: fem.element_stress(mesh, mat, np.zeros((mesh.n, 2)))):
+                 lambda: fem.element_stress(mesh, mat, np.zeros((mesh.n, 2))),
+                 lambda: jsq.scene.compliance_of(mesh, mat)):          # Scene.operator() (it read True as 1 Pa)
         with pytest.raises(ValueError, match=re.escape(f"Material.{field} {says}")):
             call()
 

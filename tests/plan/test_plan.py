@@ -46,7 +46,7 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     for spacing in (-1.0, 0.0, float("nan")):
         with pytest.raises(ValueError, match="finite arc length > 0"):
             jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
-    for spacing in ("0.1", True, 1j):
+    for spacing in ("0.1", True, 1j, [0.1, [0.2]]):
         with pytest.raises(ValueError, match="finite arc length > 0"):
             jsq.grasp_map(ellipse, "squeeze_work", spacing=spacing)
     for spacing in (1e-6, 1e-310, 5e-324):          # subnormal ones overflowed counting positions
@@ -105,7 +105,7 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
     P = float(ellipse.curve().perimeter)
     for kw, match in [(dict(chunk=0), "chunk=0 must be an integer >= 1"), (dict(keep=-1), "keep=-1"),
                       (dict(processes=0), "processes=0"), (dict(angle=float("nan")), "angle=nan must be a finite"),
-                      (dict(angle="x"), "angle='x'")]:
+                      (dict(angle="x"), "angle='x'"), (dict(angle=[0.0, [1.0]]), r"angle=\[0.0, \[1.0\]\] must be")]:
         with pytest.raises(ValueError, match=match):
             jsq.grasp_map(ellipse, "squeeze_work", spacing=P / 6, progress=False, **kw)
     with pytest.raises(ValueError, match="spacing=0 must be a finite arc length"):

@@ -425,6 +425,13 @@ def test_mixed_units():
     # iterations; a bisection that never ran gave SUCCESS with spurious events), 2**63 overflowed
     (dict(settings=jsq.Settings(newton_iters=2**31)), ValueError, "Settings.newton_iters=2147483648 is more than 10,000"),
     (dict(settings=jsq.Settings(bisect_iters=np.uint64(2**63))), ValueError, "Settings.bisect_iters=.* is more than 10,000"),
+    # lists of unequal lengths, which NumPy cannot make an array of (its own "inhomogeneous
+    # shape" ValueError came out of the checks, naming no field)
+    (dict(friction=[0.1, [0.2, 0.3]]), ValueError, r"friction = \[0.1, \[0.2, 0.3\]\]: expected a number"),
+    (dict(grip=(3, [13, 14])), ValueError, r"grip = \(3, \[13, 14\]\): expected two integer node indices"),
+    (dict(grip=None, placement=jsq.Placement(s=(0.0, [0.1, 0.2]))), ValueError, r"placement.s = .*: expected two arc"),
+    (dict(grip=None, placement=jsq.Placement(s=(0.0, 0.1), angle=[0.0, [1.0]])), ValueError, "placement.angle = "),
+    (dict(settings=jsq.Settings(step=[1e-3, [2e-3]])), ValueError, r"settings.step = \[0.001, \[0.002\]\]: expected a"),
 ])
 def test_wrong_types_and_sizes_are_named(square, change, error, message):
     """Each fails before any tracing, with the field and what it should be (they reached
@@ -604,4 +611,12 @@ def test_a_placement_turned_past_a_right_angle_does_not_grip_through_the_object(
     np.testing.assert_allclose(lost.rigid[-1], g, rtol=0, atol=0)
     np.testing.assert_allclose(lost.displacement, (rigid_modes(P, xp=np) @ g).reshape(-1, 2), rtol=0, atol=1e-15)
     assert not np.any(np.asarray(lost.forces[-1])) and float(jsq.quality.squeeze_work(lost)) == 0.0
+    # the same with two rows kept (history=False, what maps use: the row before is gone, its g
+    # is kept aside): the let-go rows were NaN there, and so were squeeze_work and its derivative
+    short = jsq.squeeze(sc.replace(placement=jsq.Placement(s=sc.placement.s, angle=np.pi / 2)), history=False)
+    assert short.status == jsq.Status.LOST_CONTACT and int(short.count) == 2
+    for name in ("forces", "boundary_displacement", "rigid"):
+        np.testing.assert_array_equal(np.asarray(getattr(short, name))[-1], np.asarray(getattr(lost, name))[-1], name)
+    np.testing.assert_array_equal(short.displacement, lost.displacement)
+    assert float(jsq.quality.squeeze_work(short)) == 0.0
     assert res[np.pi].status == jsq.Status.INFEASIBLE_GRIP and float(res[np.pi].margin) == -np.pi
