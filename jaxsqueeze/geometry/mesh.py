@@ -215,16 +215,25 @@ def signed_areas(pts, tri):
 
 #: the coarsest accepted coordinate resolution, as a share of the object's size
 RESOLUTION = 1e-6
+#: the accepted object sizes [m]: beyond them float64 products of coordinates (areas, size²)
+#: or their squares (the boundary-crossing test) overflow or underflow (at 1e300 m a square's
+#: areas were NaN and it read as "degenerate")
+SIZES = (1e-50, 1e50)
 
 
 def _check_resolution(pts) -> None:
-    """Refuse coordinates so far from the origin that float64 cannot resolve the object: the
-    spacing of float64 numbers there, over the object's size, above :data:`RESOLUTION`
-    (at 1e13 m a 0.1 m object had 1 mm of coordinate noise and 4 % force error)."""
+    """Refuse an object so small or large that float64 cannot hold its areas (size outside
+    :data:`SIZES`), or coordinates so far from the origin that float64 cannot resolve the
+    object: the spacing of float64 numbers there, over the object's size, above
+    :data:`RESOLUTION` (at 1e13 m a 0.1 m object had 1 mm of coordinate noise and 4 % force error)."""
     if not len(pts):
         return
-    size = float(np.max(np.ptp(pts, axis=0)))
+    with np.errstate(over="ignore"):
+        size = float(np.max(np.ptp(pts, axis=0)))
     far = float(np.max(np.abs(pts)))
+    if size > 0 and not SIZES[0] <= size <= SIZES[1]:
+        raise ValueError(f"the object is {size:.3g} m across: coordinates are in metres, and float64 holds the "
+                         f"areas of objects from {SIZES[0]:.0e} to {SIZES[1]:.0e} m across only")
     ulp = float(np.spacing(far))
     if size > 0 and ulp > RESOLUTION * size:
         raise ValueError(f"the points lie up to {far:.3g} m from the origin for an object {size:.3g} m across: "

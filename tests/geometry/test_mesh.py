@@ -539,6 +539,21 @@ def test_coordinates_too_far_from_the_origin_to_resolve_the_object_are_refused()
             Mesh.from_arrays(P + off, T)
 
 
+def test_objects_too_small_or_large_for_float64_areas_are_refused_by_size():
+    """A square 1e300 m across had NaN areas (overflow, with NumPy's RuntimeWarnings) and one
+    1e-300 m across zero areas: both read as "degenerate triangles", which they are not. The
+    accepted sizes are 1e-50 … 1e50 m, where areas and the crossing test's products hold."""
+    m = shapes.rectangle(0.1, 0.1, max_edge=0.02)
+    P, T = (m.points + m.offset) / 0.1, m.triangles            # a unit square
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                          # (no overflow warnings on the way)
+        for scale in (1e-50, 1e50):
+            np.testing.assert_allclose(Mesh.from_arrays(P * scale, T).points, m.points / 0.1 * scale, rtol=1e-12)
+        for scale, says in ((1e300, "1e+300 m across"), (1e-300, "1e-300 m across"), (1e51, "1e+51 m across")):
+            with pytest.raises(ValueError, match=f"the object is {re.escape(says)}: coordinates are in metres"):
+                Mesh.from_arrays(P * scale, T)
+
+
 def test_a_refine_near_point_too_far_to_refine_anything_warns():
     """refine_near in millimetres ([0, 50] for the top of a 0.1 m square) refined nothing, silently."""
     with pytest.warns(UserWarning, match=r"refine_near point 1 \[5.0, 50.0\] is 50.2 m from the object's nearest node "
