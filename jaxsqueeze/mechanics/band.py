@@ -292,9 +292,10 @@ class Band(ByContent):
         """
         xy = real_array(xy, "xy", "m")
         if xy.ndim == 2 and xy.shape[1:] == (2,) and len(xy) > MIN_NODES and np.all(np.isfinite(xy)):
-            gaps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
-            if np.linalg.norm(xy[-1] - xy[0]) <= COINCIDENT * gaps.mean():
-                xy = xy[:-1]                     # the closing point of a sampled closed curve
+            with np.errstate(over="ignore", invalid="ignore"):      # (a curve of 1e300 m: _check_extent says so)
+                gaps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+                if np.linalg.norm(xy[-1] - xy[0]) <= COINCIDENT * gaps.mean():
+                    xy = xy[:-1]                     # the closing point of a sampled closed curve
         _check_size(len(xy))
         if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < MIN_NODES or not np.all(np.isfinite(xy)):
             if xy.ndim == 2 and xy.shape[1] == 2 and xy.shape[0] >= MIN_NODES:

@@ -1,4 +1,6 @@
 """Curved band model (Section V-A): invariants, thin-ring and beam oracles, the operator."""
+import warnings
+
 import numpy as np
 import pytest
 
@@ -223,6 +225,10 @@ def test_curves():
     for size in (1e160, 1e-300):
         with pytest.raises(ValueError, match=r"the band's size, .* m across, is outside the 1e-09 \.\. 1e\+09 m"):
             Band.from_function(curves.circle(size), 16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # (NumPy's overflow warnings came first)
+        with pytest.raises(ValueError, match=r"the band's size, 8e\+298 m across"):
+            Band.from_curve(c * 1e300)
     # the outlines' sizes are numbers in metres (text, True and inf were read or failed in numpy)
     for make, bad in [(curves.circle, "a"), (curves.circle, True), (curves.heart, "1"), (curves.leaf, np.inf)]:
         with pytest.raises(ValueError, match=r"must be (one|a) positive, finite number \[m\]"):
