@@ -386,8 +386,8 @@ def grid(scene: Scene, spacing=None) -> np.ndarray:
     m = scene.mesh.loops[0] if hasattr(scene.mesh, "loops") else scene.mesh.m
     if spacing is None:
         spacing = P / m
-    if isinstance(spacing, (str, bytes, bool)) or kind(spacing) == "O" or not (np.ndim(spacing) == 0 and np.isreal(spacing)
-                                                       and np.isfinite(float(spacing)) and float(spacing) > 0):
+    if isinstance(spacing, (str, bytes, bool)) or kind(spacing) not in "iuf" or not (
+            np.ndim(spacing) == 0 and np.isfinite(float(spacing)) and float(spacing) > 0):
         raise ValueError(f"spacing={spacing!r} must be a finite arc length > 0 m (the outer boundary is {P:.4g} m "
                          f"long; the default is its node spacing, {P / m:.3g} m).")
     ratio = P / float(spacing)                 # inf for a subnormal spacing
