@@ -476,12 +476,12 @@ def read_mesh(path) -> Mesh:
     """Read a planar triangle mesh from any file format meshio knows (.msh, .vtu, .xdmf, ...).
 
     All ``triangle`` cell blocks are kept, other cells ignored; coordinates are x, y [m]
-    (a z column must be zero). Unused nodes (e.g. of line cells only, or a circle's centre
+    (a z column must hold one value: the mesh's plane z = c, e.g. a CAD sketch plane, is dropped). Unused nodes (e.g. of line cells only, or a circle's centre
     point) are dropped and the rest renumbered: ``mesh.source`` gives each node's index in the
     file, and node indices (grips, results) are the mesh's.
 
     Raises:
-        ValueError: no triangle cells in the file, or nodes off the z = 0 plane, or any
+        ValueError: no triangle cells in the file, or triangle nodes off one plane z = c, or any
             :meth:`Mesh.from_arrays` error.
 
     Warns (``UserWarning``) when the mesh is one or two elements thick somewhere
@@ -535,13 +535,19 @@ def read_mesh(path) -> Mesh:
                          "(half an object). Mesh with 3-node triangles only (gmsh: no Recombine, element order 1)")
     pts = np.asarray(m.points, dtype=np.float64)
     if pts.ndim == 2 and pts.shape[1] == 3:
-        xy = pts[:, :2]
+        xy, z = pts[:, :2], pts[:, 2]
         ok = np.all(np.isfinite(xy), axis=1)         # a node NaN in x or y: from_arrays names it
+        used = np.zeros(len(pts), bool)              # (nodes of no triangle are dropped: their z is no matter)
+        used[np.concatenate(blocks, axis=0).ravel().clip(0, len(pts) - 1).astype(np.int64)] = True
+        ok &= used
         scale = float(np.ptp(xy[ok], axis=0).max()) if ok.any() else 0.0
-        bad = np.flatnonzero(ok & ~(np.abs(pts[:, 2]) <= 1e-9 * max(scale, 1e-300)))     # NaN z too
+        level = ok & np.isfinite(z)
+        z0 = float(np.median(z[level])) if level.any() else 0.0
+        bad = np.flatnonzero(ok & ~(np.abs(z - z0) <= 1e-9 * max(scale, abs(z0), 1e-300)))     # NaN z too
         if bad.size:
-            raise ValueError(f"mesh in {path} is not planar: nodes {_few(bad)} have z = "
-                             f"{_few(pts[bad, 2])} (must be 0); jaxsqueeze needs meshes in the z = 0 plane")
+            raise ValueError(f"mesh in {path} is not planar: nodes {_few(bad)} have z = {_few(z[bad])}, off the "
+                             f"plane z = {z0:.6g} of the median node (z from {np.nanmin(z[ok]):.6g} to "
+                             f"{np.nanmax(z[ok]):.6g}); jaxsqueeze needs a mesh in one plane z = constant")
         pts = xy
     mesh = Mesh.from_arrays(pts, np.concatenate(blocks, axis=0))
     thin = too_thin(mesh)

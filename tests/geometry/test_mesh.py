@@ -457,9 +457,14 @@ def test_read_errors(tmp_path):
     path = tmp_path / "tilted.vtu"
     tilted = pts3 + [[0, 0, 0], [0, 0, 0.5], [0, 0, 0]]
     meshio.write(path, meshio.Mesh(tilted, [("triangle", np.array([[0, 1, 2]]))]))
-    with pytest.raises(ValueError, match=r"not planar: nodes 1"):
+    with pytest.raises(ValueError, match=r"not planar: nodes 1 have z = 0.5, off the plane z = 0 of the median node \(z from 0 to 0.5\)"):
         read_mesh(path)
-    path = tmp_path / "nan_z.vtu"                    # a NaN z is not 0 either (|NaN| > tol is False)
+    path = tmp_path / "lifted.vtu"                   # one plane z = c (a CAD sketch plane) is that plane; it was refused
+    meshio.write(path, meshio.Mesh(np.vstack([pts3 + [0, 0, 5.0], [7, 7, -1.0]]),
+                                   [("triangle", np.array([[0, 1, 2]]))]))        # (node 3: in no triangle)
+    lifted = read_mesh(path)
+    np.testing.assert_array_equal(lifted.points + lifted.offset, pts3[:, :2])
+    path = tmp_path / "nan_z.vtu"                    # a NaN z is not on the plane either (|NaN| > tol is False)
     meshio.write(path, meshio.Mesh(pts3 + [[0, 0, 0], [0, 0, np.nan], [0, 0, 0]], [("triangle", np.array([[0, 1, 2]]))]))
     with pytest.raises(ValueError, match=r"not planar: nodes 1"):
         read_mesh(path)
