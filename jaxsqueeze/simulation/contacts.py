@@ -365,7 +365,8 @@ def _slip_angles(model: Model, sl: Slots, v: _View, d):
     least-squares rigid fit), and
     ε = ``NEUTRAL_REG`` × the mean contact stiffness: a spring anchored at the touch, stiff
     against the drift mode's negative stiffness (``docs/numerics.md`` §5.1). ĝ⊥ is continuous
-    at a contact change (a node joins unloaded), so a joining node feels no jump from it.
+    at a contact change (a node joins unloaded), but its sensitivity to the slots is not: a
+    joining node may carry a small transient pull (§5.1, "Known imperfection").
 
     The unknowns are only the sliding slots: gathered into ``Config.sliding`` positions (one
     system; more sliding slots stop the squeeze with an overflow), or with ``sliding = 0`` into
