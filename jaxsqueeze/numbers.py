@@ -16,7 +16,7 @@ def real_array(x, what: str, unit: str = "") -> np.ndarray:
         raise ValueError(f"{what} must be an array of real numbers{where}; got {x!r:.80}") from None
     if a.dtype.kind not in "iuf":
         raise ValueError(f"{what} must be real numbers{where}; got dtype {a.dtype}")
-    if _holds_bool(x):                   # NumPy reads [True, 0.1] as [1.0, 0.1]
+    if holds_bool(x):                   # NumPy reads [True, 0.1] as [1.0, 0.1]
         raise ValueError(f"{what} must be real numbers{where}; got a boolean in {x!r:.80}")
     return a.astype(np.float64)
 
@@ -30,11 +30,11 @@ def kind(x) -> str:
         return "O"
 
 
-def _holds_bool(x) -> bool:
+def holds_bool(x) -> bool:
     """Whether a (nested) list or tuple holds a Python or NumPy boolean."""
     if isinstance(x, (bool, np.bool_)):
         return True
-    return isinstance(x, (list, tuple)) and any(_holds_bool(v) for v in x)
+    return isinstance(x, (list, tuple)) and any(holds_bool(v) for v in x)
 
 
 def positive(x, what: str, unit: str = "") -> float:

@@ -17,15 +17,7 @@ from .laws import CONTACT_MODELS, FRICTION_MODELS
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
 from ..mechanics.operator import Compliance
-from ..numbers import real_array
-
-
-
-def _holds_bool(x) -> bool:
-    """Whether nested lists/tuples hold a bool (numpy reads [0.1, True] as floats)."""
-    if isinstance(x, (list, tuple)):
-        return any(_holds_bool(v) for v in x)
-    return isinstance(x, (bool, np.bool_))
+from ..numbers import holds_bool, kind, real_array
 
 
 @jax.tree_util.register_dataclass
@@ -59,10 +51,12 @@ class Fingers:
             raise ValueError(f"Fingers.rotation rows have different lengths {rows}: "
                              "give both fingers k coefficients, padding the shorter polynomial with leading zeros "
                              "(highest power first).")
-        if self.rotation is not None and is_concrete(self.rotation) and (
-                np.asarray(self.rotation).dtype.kind in "bcSU" or _holds_bool(self.rotation)):
-            raise ValueError(f"Fingers.rotation = {np.asarray(self.rotation).tolist()!r:.60}: expected real "
-                             "polynomial coefficients [rad] of shape (2, k)")
+        rot_kind = kind(self.rotation) if self.rotation is not None and is_concrete(self.rotation) else "f"
+        ragged = rot_kind == "O" and isinstance(self.rotation, (list, tuple, dict))     # (not JAX's placeholders)
+        if ragged or rot_kind in "bcSU" or holds_bool(self.rotation):
+            shown = self.rotation if ragged else np.asarray(self.rotation).tolist()
+            raise ValueError(f"Fingers.rotation = {shown!r:.60}: expected real polynomial coefficients [rad] of "
+                             "shape (2, k)")
         if self.rotation is not None and numeric(self.rotation):
             rot = np.asarray(self.rotation, float)
             if rot.ndim != 2 or rot.shape[0] != 2:

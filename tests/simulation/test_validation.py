@@ -441,10 +441,12 @@ def test_wrong_types_and_sizes_are_named(square, change, error, message):
 
 
 @pytest.mark.parametrize("rotation", [[[0.1j, 0.0], [0.0, 0.0]], np.array([["0.1"], ["0"]]),
-                                      [[True, False], [False, True]], [[0.1, True], [0.0, 0.0]]])
+                                      [[True, False], [False, True]], [[0.1, True], [0.0, 0.0]],
+                                      [[0.1, [0.2]], [0.0, 0.0]], {"a": 1.0}])
 def test_a_rotation_of_complex_text_or_boolean_coefficients_is_named(rotation):
     """(complex reached a bare float() TypeError inside grasp_of; numpy would drop its imaginary
-    part; booleans squeezed as 1 rad/m and 1 rad, refused everywhere else)"""
+    part; booleans squeezed as 1 rad/m and 1 rad, refused everywhere else; a ragged row reached
+    NumPy's own error, a dict was accepted)"""
     with pytest.raises(ValueError, match=r"Fingers.rotation = .*: expected real polynomial coefficients"):
         jsq.Fingers(radius=0.01, rotation=rotation)
 
