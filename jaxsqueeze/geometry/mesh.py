@@ -475,10 +475,11 @@ def too_thin(mesh: Mesh) -> tuple[str, float] | None:
 def read_mesh(path) -> Mesh:
     """Read a planar triangle mesh from any file format meshio knows (.msh, .vtu, .xdmf, ...).
 
-    All ``triangle`` cell blocks are kept, other cells ignored; coordinates are x, y [m]
-    (a z column must hold one value: the mesh's plane z = c, e.g. a CAD sketch plane, is dropped). Unused nodes (e.g. of line cells only, or a circle's centre
-    point) are dropped and the rest renumbered: ``mesh.source`` gives each node's index in the
-    file, and node indices (grips, results) are the mesh's.
+    All ``triangle`` cell blocks are kept, other cells ignored; coordinates are x, y [m] (a z
+    column must hold one value: the mesh's plane z = c, e.g. a CAD sketch plane, is dropped).
+    Unused nodes (e.g. of line cells only, or a circle's centre point) are dropped and the rest
+    renumbered: ``mesh.source`` gives each node's index in the file, and node indices (grips,
+    results) are the mesh's.
 
     Raises:
         ValueError: no triangle cells in the file, or triangle nodes off one plane z = c, or any
@@ -541,13 +542,14 @@ def read_mesh(path) -> Mesh:
         used[np.concatenate(blocks, axis=0).ravel().clip(0, len(pts) - 1).astype(np.int64)] = True
         ok &= used
         scale = float(np.ptp(xy[ok], axis=0).max()) if ok.any() else 0.0
-        level = ok & np.isfinite(z)
-        z0 = float(np.median(z[level])) if level.any() else 0.0
+        zs = z[ok & np.isfinite(z)]
+        z0 = float(np.median(zs)) if zs.size else 0.0
         bad = np.flatnonzero(ok & ~(np.abs(z - z0) <= 1e-9 * max(scale, abs(z0), 1e-300)))     # NaN z too
         if bad.size:
+            span = f" (z from {zs.min():.6g} to {zs.max():.6g})" if zs.size else ""
             raise ValueError(f"mesh in {path} is not planar: nodes {_few(bad)} have z = {_few(z[bad])}, off the "
-                             f"plane z = {z0:.6g} of the median node (z from {np.nanmin(z[ok]):.6g} to "
-                             f"{np.nanmax(z[ok]):.6g}); jaxsqueeze needs a mesh in one plane z = constant")
+                             f"plane z = {z0:.6g} of the median node{span}; jaxsqueeze needs a mesh in one plane "
+                             "z = constant")
         pts = xy
     mesh = Mesh.from_arrays(pts, np.concatenate(blocks, axis=0))
     thin = too_thin(mesh)
