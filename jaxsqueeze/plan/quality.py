@@ -22,7 +22,9 @@ batched result (of ``jax.vmap(squeeze)``) it returns one value per member (:func
   plain maximum over the contacts jumped there (0.09 → 0.27 as a contact joined).
 * :func:`adversary_work` — the work the pusher does on the object during the adversary
   phase, W = Σ_k ½ (F_2(k) + F_2(k+1)) · (x_2(k+1) − x_2(k)) [J]: the energy the grasp absorbs
-  in resisting the push (Jia, Guo and Lin, IJRR 2014); larger is better.
+  in resisting the push (Jia, Guo and Lin, IJRR 2014); larger is better. ``push=p``: the
+  work up to the push displacement p [m], the increment that holds p cut there (its slope in
+  p is the pusher's force along its motion).
 * :func:`finger_work` — (2,) the share of that work each grasping finger resists:
   W_i = −Σ_k ½ (ΔF_i(k) + ΔF_i(k+1)) · (x_2(k+1) − x_2(k)), ΔF_i the change of finger i's force
   since the push began; W_0 + W_1 = W by equilibrium.
@@ -63,9 +65,11 @@ def per_result(fn):
 
     @functools.wraps(fn)
     @own_transfers
-    def wrapped(res):
+    def wrapped(res, *args):          # (args: shared by every member of a batch)
         _check_result(res, fn.__name__)
-        return jax.vmap(whole)(res) if jnp.ndim(res.depth) == 2 else whole(res)
+        if jnp.ndim(res.depth) == 2:
+            return jax.vmap(whole, in_axes=(0,) + (None,) * len(args))(res, *args)
+        return whole(res, *args)
     return wrapped
 
 
@@ -185,15 +189,74 @@ def _push_work(res: SqueezeResult):
 
 
 @per_result
-def adversary_work(res: SqueezeResult):
-    """() work the pusher does on the object during the adversary phase [J] (module docstring)."""
-    return _push_work(res)[0]
+def _whole_push(res: SqueezeResult):
+    return _push_work(res)
 
 
 @per_result
-def finger_work(res: SqueezeResult):
-    """(2,) work each grasping finger resists during the push [J]; they sum to :func:`adversary_work`."""
-    return _push_work(res)[1:]
+def _push_until(res: SqueezeResult, push):
+    """(3,) the works of :func:`_push_work` up to the push displacement ``push`` [m]: the
+    trapezoid rule over the recorded increments, the one that holds ``push`` cut there (the
+    forces linear in the push within an increment, as the rule assumes); from the last row's
+    push on, the engine's whole sums. NaN below it for a result that kept two rows
+    (``history=False``), whose increments are gone."""
+    total = _push_work(res)
+    _, _, pushed = _rows(res)
+    p = jnp.asarray(res.push)
+    push = jnp.asarray(push, p.dtype)
+    F = res.finger_forces                                    # (k, 3, 2)
+    x = jnp.asarray(res.centres)[:, 2]                       # (k, 2) the pusher's centre
+    F0 = F[_squeeze_row(res)]                                # the forces as the push began
+    dp = p[1:] - p[:-1]
+    moved = dp > 0                                           # (rows at one push move nothing)
+    t = jnp.where(moved, jnp.clip((push - p[:-1]) / jnp.where(moved, dp, 1.0), 0.0, 1.0), 0.0)
+    mid = F[:-1] + 0.5 * t[:, None, None] * (F[1:] - F[:-1])  # the mean force over the cut increment
+    dx = t[:, None] * (x[1:] - x[:-1])
+    on = pushed[1:]
+    inc = jnp.stack([jnp.sum(mid[:, 2] * dx, -1), -jnp.sum((mid[:, 0] - F0[0]) * dx, -1),
+                     -jnp.sum((mid[:, 1] - F0[1]) * dx, -1)], -1)
+    part = jnp.sum(jnp.where(on[:, None], inc, 0.0), 0)
+    last = p[res.count - 1]
+    kept = res.count != 2                # two rows with a push: history=False (with the history
+    return jnp.where(push >= last, total, jnp.where(kept, part, jnp.nan))  # a push needs >= 3)
+
+
+def _push_arg(res: SqueezeResult, push, name: str):
+    """``push`` checked where it is concrete: one finite number >= 0 [m], and a result that
+    kept its rows when it lies below the last row's push."""
+    if not is_concrete(push):
+        return push
+    p = real_array(push, f"{name}'s push (the push displacement to integrate up to)", "m")
+    if p.ndim or not (np.isfinite(p) and p >= 0):
+        raise ValueError(f"{name}'s push must be one finite push displacement >= 0 [m]; got {push!r:.80}")
+    if is_concrete(res.count) and jnp.ndim(res.count) == 0 and int(res.count) == 2 and \
+            p < float(jnp.asarray(res.push)[1]):
+        raise ValueError(f"{name}(res, push={float(p)!r}): this result kept two rows (history=False), "
+                         "so the work up to a push short of its last one is gone; squeeze with the "
+                         "history (the default) or leave push out for the whole push's work")
+    return p
+
+
+@own_transfers
+def adversary_work(res: SqueezeResult, push=None):
+    """() work the pusher does on the object during the adversary phase [J] (module
+    docstring); (B,) for a batched result. ``push`` [m]: only up to that push displacement
+    (the increment that holds it cut there; a push at or beyond the last row's, where the grasp
+    failed or the push ended, gives the whole work)."""
+    _check_result(res, "adversary_work")
+    if push is None:
+        return _whole_push(res)[..., 0]
+    return _push_until(res, _push_arg(res, push, "adversary_work"))[..., 0]
+
+
+@own_transfers
+def finger_work(res: SqueezeResult, push=None):
+    """(2,) work each grasping finger resists during the push [J]; they sum to
+    :func:`adversary_work` (``push`` likewise); (B, 2) for a batched result."""
+    _check_result(res, "finger_work")
+    if push is None:
+        return _whole_push(res)[..., 1:]
+    return _push_until(res, _push_arg(res, push, "finger_work"))[..., 1:]
 
 
 @per_result

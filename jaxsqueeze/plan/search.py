@@ -671,5 +671,8 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
         if progress and interactive():
             print(f"start {k + 1}/{len(init)}: best {best_q:.6g}", file=sys.stderr)
     if best_x is None:
-        raise ValueError("no start reached a successful squeeze")
+        ends = sorted({Status(h[-1].status).name for h in histories})
+        raise ValueError(f"no start reached a successful squeeze (the {len(histories)} start(s) ended with "
+                         f"{', '.join(ends)}); start from feasible placements: leave init out (the best "
+                         "cells of a coarse grasp map), or pick feasible cells of jsq.grasp_map")
     return Search(Placement(s=best_x[:2], angle=float(best_x[2])), best_q, histories, squeezes, screened)

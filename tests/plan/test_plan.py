@@ -599,6 +599,47 @@ def test_slip_margin_takes_the_cones_of_the_scene_friction_model(square):
         Q.failure_push(res)
 
 
+def test_push_work_up_to_a_push_displacement(square):
+    """``adversary_work(res, push=p)`` and ``finger_work(res, push=p)``: the work up to the push
+    displacement p. At a recorded row's push it is the plain trapezoid sum over the rows up to
+    it; its slope in p (``jax.jacfwd``) is the pusher's force along its motion, and central
+    differences agree; it never falls (the pusher pushes); the shares add up to it; from the
+    last row's push on it is the whole work. A result that kept two rows cannot say it (an
+    error eagerly, NaN when traced); a bad push is an error that names it."""
+    k = nearest(square.mesh, (0.05, 0.0))
+    sc = square.replace(adversary=plan.Adversary(s=float(square.arc_length([k])[0]) + 0.004, push=0.003))
+    res = jsq.squeeze(sc)
+    p, x = np.asarray(res.push), np.asarray(res.centres)[:, 2]
+    F = np.asarray(res.finger_forces)
+    W = float(Q.adversary_work(res))
+    first = int(np.argmax(p > 0))                       # the first push row; the one before starts the push
+    inc = np.einsum("ki,ki->k", 0.5 * (F[first:, 2] + F[first - 1:-1, 2]), x[first:] - x[first - 1:-1])
+    for row in (first + 3, (first + len(p)) // 2, len(p) - 2):
+        np.testing.assert_allclose(float(Q.adversary_work(res, push=p[row])), inc[:row - first + 1].sum(), rtol=1e-10)
+    sweep = [float(Q.adversary_work(res, push=q)) for q in np.linspace(0, p[-1], 23)]
+    assert sweep[0] == 0 and np.all(np.diff(sweep) >= 0) and sweep[-1] == W > 0
+    np.testing.assert_allclose(float(Q.adversary_work(res, push=p[-1] * (1 - 1e-9))), W, rtol=1e-7)
+    assert float(Q.adversary_work(res, push=1.0)) == W
+    q = 0.5 * (p[first + 5] + p[first + 6])            # mid-increment: forces linear in the push
+    slope = float(jax.jacfwd(lambda z: Q.adversary_work(res, push=z))(q))
+    j = first + 6
+    along = 0.5 * (F[j - 1, 2] + F[j, 2]) @ (x[j] - x[j - 1]) / (p[j] - p[j - 1])
+    h = 1e-3 * (p[j] - p[j - 1])
+    fd = (float(Q.adversary_work(res, push=q + h)) - float(Q.adversary_work(res, push=q - h))) / (2 * h)
+    np.testing.assert_allclose(slope, along, rtol=1e-10)
+    np.testing.assert_allclose(fd, slope, rtol=1e-6)
+    w = np.asarray(Q.finger_work(res, push=q))
+    np.testing.assert_allclose(w.sum(), float(Q.adversary_work(res, push=q)), rtol=1e-9)
+    short = jsq.squeeze(sc, history=False)
+    with pytest.raises(ValueError, match="kept two rows"):
+        Q.finger_work(short, push=q)
+    assert np.isnan(float(jax.jit(lambda r: Q.adversary_work(r, push=q))(short)))
+    assert float(Q.adversary_work(short, push=p[-1])) == float(Q.adversary_work(short))
+    for bad in (-1e-3, float("nan"), "0.001", [q, q], True):
+        with pytest.raises(ValueError, match="adversary_work's push"):
+            Q.adversary_work(res, push=bad)
+
+
 def test_symmetric_push_is_resisted_equally_by_both_fingers(square, tmp_path):
     """An adversary pushing the mirror-symmetric squeezed square at mid-height of a free side
     (on the node there), toward its centre: both grasping fingers resist equally, and their
@@ -914,6 +955,10 @@ def test_a_search_history_records_undone_steps_once(ellipse):
     assert all(h.status == jsq.Status.SUCCESS for h in path)
     assert all(np.any(a.x != b.x) for a, b in zip(path, path[1:]))       # it moved at every accepted step
     assert found.quality == max(h.quality for h in path)
+    # starts that never squeeze with SUCCESS: the error says how they ended and what to do
+    with pytest.raises(ValueError, match=r"no start reached a successful squeeze \(the 1 start\(s\) ended with "
+                                         r"INFEASIBLE_GRIP\); start from feasible placements"):
+        jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, 0.05]], steps=1, progress=False)
     # docs/planning.md: the compiled gradient is shared by every search on scenes of the same
     # shapes (other numbers, another start and optimizer: nothing compiles)
     from jaxsqueeze.plan import search
