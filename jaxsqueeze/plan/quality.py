@@ -182,7 +182,7 @@ def _slip_margin(res: SqueezeResult, friction, tau, x0=None, loops=None):
 def _push_work(res: SqueezeResult):
     """(3,) [J]: the pusher's work and each grasping finger's share, summed by the engine over
     every push increment (the trapezoid rule above), so also for results that keep only their
-    last rows (``Settings(history=False)``: a sum over the recorded rows saw one increment)."""
+    last rows (``jsq.squeeze(scene, history=False)``: a sum over the recorded rows saw one increment)."""
     if jnp.asarray(res.centres).shape[-2] < 3:
         raise ValueError("this result has no adversary phase: give the scene an Adversary")
     return jnp.asarray(res.push_work)

@@ -146,7 +146,7 @@ class SqueezeResult:
         event log are the squeeze's (at squeeze depths), the rest the push's (at push
         displacements).
 
-    A result computed with ``history=False`` (what grasp maps use) holds two rows: row 0 the
+    A result computed with ``history=False`` (a few kilobytes per grasp) holds two rows: row 0 the
     last squeeze-phase row, row 1 the last row; ``stats`` still counts every step and event.
     """
 

@@ -256,10 +256,10 @@ def _pushed(ellipse, x):
 
 
 def test_jacfwd_in_placement_matches_central_differences(ellipse):
-    """d(grip force, adversary work)/d(s_0, s_1, angle, s_push) by jax.jacfwd against central
-    differences (step 1e-6 m or rad; agree to rtol 1e-6 away from event switches): through the
-    squeeze and through the push phase, whose pushed point and normal move continuously with
-    s_push (docs/planning.md, "The adversary push").
+    """d(grip force, adversary work, its work up to 1 mm of push)/d(s_0, s_1, angle, s_push) by
+    jax.jacfwd against central differences (step 1e-6 m or rad; agree to rtol 1e-6 away from
+    event switches): through the squeeze and through the push phase, whose pushed point and
+    normal move continuously with s_push (docs/planning.md, "The adversary push").
 
     The eager ``jacfwd`` compiles ~30 programs when it runs first in a process (the squeeze's
     derivative, the scene's conversions and validation, each quality, the operator's element
@@ -270,7 +270,7 @@ def test_jacfwd_in_placement_matches_central_differences(ellipse):
 
     def f(x):
         res = _pushed(ellipse, x)
-        return jnp.stack([Q.grip_force(res), Q.adversary_work(res)]), res.status
+        return jnp.stack([Q.grip_force(res), Q.adversary_work(res), Q.adversary_work(res, push=0.001)]), res.status
 
     with compiles() as compiled:
         J, status = jax.jacfwd(f, has_aux=True)(jnp.asarray(x0))
@@ -279,7 +279,7 @@ def test_jacfwd_in_placement_matches_central_differences(ellipse):
     for k in range(4):
         h = np.eye(4)[k] * 1e-6
         fd = (np.asarray(f(x0 + h)[0]) - np.asarray(f(x0 - h)[0])) / 2e-6
-        on = [0, 1] if k < 3 else [1]              # the push comes after the grip force's row
+        on = [0, 1, 2] if k < 3 else [1, 2]        # the push comes after the grip force's row
         assert np.all(np.abs(fd[on]) > 1e-6)
         np.testing.assert_allclose(J[on, k], fd[on], rtol=1e-6)
     assert float(J[0, 3]) == 0.0

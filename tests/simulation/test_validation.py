@@ -613,7 +613,7 @@ def test_a_placement_turned_past_a_right_angle_does_not_grip_through_the_object(
     np.testing.assert_allclose(lost.rigid[-1], g, rtol=0, atol=0)
     np.testing.assert_allclose(lost.displacement, (rigid_modes(P, xp=np) @ g).reshape(-1, 2), rtol=0, atol=1e-15)
     assert not np.any(np.asarray(lost.forces[-1])) and float(jsq.quality.squeeze_work(lost)) == 0.0
-    # the same with two rows kept (history=False, what maps use: the row before is gone, its g
+    # the same with two rows kept (history=False: the row before is gone, its g
     # is kept aside): the let-go rows were NaN there, and so were squeeze_work and its derivative
     short = jsq.squeeze(sc.replace(placement=jsq.Placement(s=sc.placement.s, angle=np.pi / 2)), history=False)
     assert short.status == jsq.Status.LOST_CONTACT and int(short.count) == 2
