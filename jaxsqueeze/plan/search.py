@@ -50,6 +50,22 @@ ACCELERATOR_CHUNK = 1024   # per vmap chunk on an accelerator: on an H200 a vmap
 #                            took 1.0 ms per member at 256, 0.55 at 1,024, 0.41 at 4,096 (benchmarks)
 
 
+class SceneSlipMargin(NamedTuple):
+    """The quality "slip_margin" of a scene: :func:`~jaxsqueeze.plan.quality.slip_margin` with
+    the scene's μ, object and contact and friction models (what it reads of a scene). A value,
+    not a closure: maps and searches take their quality as a static argument of their compiled
+    programs, so equal scenes share them (a closure made anew for every call compiled every
+    map and search again, ~5 s each)."""
+
+    friction: float
+    mesh: object
+    contact: str
+    friction_model: str
+
+    def __call__(self, res):
+        return slip_margin(res, self.friction, scene=self)
+
+
 def quality_of(scene: Scene, quality) -> Callable:
     """A function result → () for a quality given by name (``QUALITIES``) or as a callable."""
     if callable(quality):
@@ -59,8 +75,7 @@ def quality_of(scene: Scene, quality) -> Callable:
                              "lambda res: jsq.quality.slip_margin(res, mu, scene=scene)")
         return quality
     if quality == "slip_margin":
-        mu = scene.friction
-        return lambda res: slip_margin(res, mu, scene=scene)
+        return SceneSlipMargin(float(np.asarray(scene.friction)), scene.mesh, scene.contact, scene.friction_model)
     if quality in QUALITIES:
         if quality == "adversary_work" and scene.adversary is None:
             raise ValueError("quality 'adversary_work' needs an Adversary on the scene "

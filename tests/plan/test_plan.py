@@ -187,7 +187,8 @@ def test_a_placed_squeeze_deeper_than_its_first_contacts_are_apart_is_invalid(el
 def test_a_rebuilt_equal_scene_reuses_the_compiled_map(ellipse):
     """Meshes compare by content: the same mesh built again is equal (and hashes alike), so a
     map of the rebuilt scene reuses the compiled program (every new mesh object compiled the
-    planner's programs again, ~3 s each); another mesh is not equal."""
+    planner's programs again, ~3 s each); another mesh is not equal. The same for the quality
+    "slip_margin", which is the margin of a direct squeeze."""
     from jaxsqueeze.plan import search
     again = jsq.shapes.ellipse(0.06, 0.04, max_edge=0.006)
     assert again is not ellipse.mesh and again == ellipse.mesh and hash(again) == hash(ellipse.mesh)
@@ -200,6 +201,14 @@ def test_a_rebuilt_equal_scene_reuses_the_compiled_map(ellipse):
         gmap = jsq.grasp_map(ellipse, spacing=P / 4, progress=False)
     assert gmap.evaluations == 6 and gmap.feasible().any()
     assert search._one._cache_size() == n and other.quality[0] == first.quality[0]
+    # the quality "slip_margin" too: it was a closure made anew on every call, and every map and
+    # search with it compiled again (~5 s each)
+    margin = plan.evaluate(ellipse, [[0.0, P / 2]], "slip_margin", batch="loop", progress=False)
+    n = search._one._cache_size()
+    again = plan.evaluate(ellipse.replace(mesh=again), [[0.0, P / 2]], "slip_margin", batch="loop", progress=False)
+    assert search._one._cache_size() == n and again.quality[0] == margin.quality[0]
+    placed = ellipse.replace(placement=plan.Placement(s=(0.0, P / 2)))
+    assert margin.quality[0] == pytest.approx(float(Q.slip_margin(jsq.squeeze(placed), 0.5, scene=placed)), rel=1e-12)
 
 
 def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
