@@ -217,8 +217,8 @@ def _push_until(res: SqueezeResult, push):
                      -jnp.sum((mid[:, 1] - F0[1]) * dx, -1)], -1)
     part = jnp.sum(jnp.where(on[:, None], inc, 0.0), 0)
     last = p[res.count - 1]
-    kept = res.count != 2                # two rows with a push: history=False (with the history
-    return jnp.where(push >= last, total, jnp.where(kept, part, jnp.nan))  # a push needs >= 3)
+    # two rows with a push are a history=False result (with its history a push takes >= 3)
+    return jnp.where(push >= last, total, jnp.where(res.count != 2, part, jnp.nan))
 
 
 def _push_arg(res: SqueezeResult, push, name: str):
