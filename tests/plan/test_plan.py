@@ -211,6 +211,42 @@ def test_a_rebuilt_equal_scene_reuses_the_compiled_map(ellipse):
     assert margin.quality[0] == pytest.approx(float(Q.slip_margin(jsq.squeeze(placed), 0.5, scene=placed)), rel=1e-12)
 
 
+def test_named_qualities_squeeze_with_two_rows_and_functions_with_the_history(ellipse):
+    """A map or search of a named quality squeezes with two rows kept (history=False: it reads
+    only the end of the squeeze and the last row), a quality function with the whole history
+    (it may read any row): the traced programs hold (2, m) or (rows, m) arrays. Both give the
+    quality of a direct squeeze."""
+    from jaxsqueeze.plan import search
+    op, m = ellipse.operator(), ellipse.mesh.m
+    P = float(ellipse.curve().perimeter)
+    x = jnp.array([0.0, P / 2, 0.0])
+
+    def shapes(qfn):
+        seen = set()
+
+        def walk(jaxpr):
+            for eqn in jaxpr.eqns:
+                seen.update(tuple(v.aval.shape) for v in eqn.outvars if hasattr(v.aval, "shape"))
+                for value in eqn.params.values():
+                    for sub in value if isinstance(value, (list, tuple)) else [value]:
+                        inner = getattr(sub, "jaxpr", sub)
+                        if hasattr(inner, "eqns"):
+                            walk(inner)
+        walk(jax.make_jaxpr(lambda x: search._summary(ellipse, qfn, op, x))(x).jaxpr)
+        return {sh[0] for sh in seen if len(sh) == 2 and sh[1] == m}
+
+    rows = jsq.Settings().max_steps or 400
+    named = search.quality_of(ellipse, "slip_margin")
+    assert search.two_rows(named) and search.two_rows(Q.squeeze_work)
+    assert not search.two_rows(lambda r: Q.squeeze_work(r))
+    assert 2 in shapes(named) and rows + 1 not in shapes(named)
+    assert rows + 1 in shapes(lambda r: Q.squeeze_work(r))
+    placed = ellipse.replace(placement=plan.Placement(s=(0.0, P / 2)))
+    direct = float(Q.squeeze_work(jsq.squeeze(placed)))
+    mapped = plan.evaluate(ellipse, [[0.0, P / 2]], batch="loop", progress=False).quality[0]
+    assert mapped == pytest.approx(direct, rel=1e-12)
+
+
 def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
     """Fingers placed by arc length at the grip nodes touch those nodes first, and the squeeze
     is the integer-grip squeeze."""
