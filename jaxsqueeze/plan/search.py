@@ -46,6 +46,10 @@ class Summary(NamedTuple):
 
 QUALITIES = ("squeeze_work", "grip_force", "slip_margin", "adversary_work")
 CHUNK = 64            # candidates per chunk by default: a CPU's vmap chunk or a worker's share
+#: from this many candidates "auto" vmaps chunks on a CPU too: the batched program compiles
+#: ~1 s longer than one squeeze's and saves ~0.7 ms per candidate (a map of the test
+#: ellipse's 1,378 pairs: 0.24-0.35 s in chunks of 64 against 1.3 s in a loop, 2026-12-07)
+CPU_VMAP_FROM = 1024
 ACCELERATOR_CHUNK = 1024   # per vmap chunk on an accelerator: on an H200 a vmap of foam-square squeezes
 #                            took 1.0 ms per member at 256, 0.55 at 1,024, 0.41 at 4,096 (benchmarks)
 
@@ -282,12 +286,12 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     (also (B, 2) with angle 0, or :class:`~jaxsqueeze.Placement` objects: :func:`candidates`).
 
     ``batch``: "vmap" (one compiled ``vmap`` per chunk of ``chunk`` candidates, the last one
-    padded: what pays on a GPU), "loop" (one compiled squeeze called per candidate: faster on
-    a CPU, where a batched loop runs every lane's event location at every step),
+    padded), "loop" (one compiled squeeze called per candidate: a batched loop runs every
+    lane's event location at every step, and each chunk as long as its longest squeeze),
     "processes" (chunks of ``chunk`` candidates looped in ``processes`` worker processes, one
     per core by default, through :func:`jaxsqueeze.batch.map_scenes`; ``cache`` is the workers'
     persistent compilation cache; ``quality`` must then be a name or a module-level function),
-    or "auto" (vmap on an accelerator, loop on the CPU). ``chunk`` (default: :data:`CHUNK`, and
+    or "auto" (vmap; on the CPU a loop for fewer than :data:`CPU_VMAP_FROM` candidates). ``chunk`` (default: :data:`CHUNK`, and
     for "vmap" on an accelerator up to :data:`ACCELERATOR_CHUNK`, no more than the candidates)
     is one compiled program's batch there. A failed or infeasible candidate
     returns its status with quality 0 and costs only its first solve in a loop. Candidates are
@@ -343,7 +347,7 @@ def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, c
     op = scene.operator() if op is None else op
     qfn = quality_of(scene, quality)
     if batch == "auto":
-        batch = "loop" if compiler.platform() == "cpu" else "vmap"
+        batch = "loop" if compiler.platform() == "cpu" and len(X) < CPU_VMAP_FROM else "vmap"
     if batch not in ("vmap", "loop", "processes"):
         raise ValueError(f"batch={batch!r}; choose 'auto', 'vmap', 'loop' or 'processes'")
     chunk = chunk or _default_chunk(batch, len(X), compiler.platform())
@@ -362,7 +366,9 @@ def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, c
         return Summary(*(np.concatenate(a) for a in zip(*out)))
     for start in range(0, len(X), chunk):
         part = X[start:start + chunk]
-        size = min(chunk, 1 << (len(part) - 1).bit_length())    # a short chunk padded to a power of two only
+        # the last chunk padded to the whole chunk (its program exists); a batch of one short
+        # chunk to a power of two only
+        size = chunk if len(X) > chunk else min(chunk, 1 << (len(part) - 1).bit_length())
         pad = np.concatenate([part, np.repeat(part[-1:], size - len(part), 0)])
         s = _batch(scene, qfn, op, jnp.asarray(pad))
         out.append(jax.tree.map(lambda a: np.asarray(a)[:len(part)], s))
