@@ -46,10 +46,6 @@ class Summary(NamedTuple):
 
 QUALITIES = ("squeeze_work", "grip_force", "slip_margin", "adversary_work")
 CHUNK = 64            # candidates per chunk by default: a CPU's vmap chunk or a worker's share
-#: from this many candidates "auto" vmaps chunks on a CPU too: the batched program compiles
-#: ~1 s longer than one squeeze's and saves ~0.7 ms per candidate (a map of the test
-#: ellipse's 1,378 pairs: 0.24-0.35 s in chunks of 64 against 1.3 s in a loop, 2026-12-07)
-CPU_VMAP_FROM = 1024
 ACCELERATOR_CHUNK = 1024   # per vmap chunk on an accelerator: on an H200 a vmap of foam-square squeezes
 #                            took 1.0 ms per member at 256, 0.55 at 1,024, 0.41 at 4,096 (benchmarks)
 
@@ -291,7 +287,10 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     "processes" (chunks of ``chunk`` candidates looped in ``processes`` worker processes, one
     per core by default, through :func:`jaxsqueeze.batch.map_scenes`; ``cache`` is the workers'
     persistent compilation cache; ``quality`` must then be a name or a module-level function),
-    or "auto" (vmap; on the CPU a loop for fewer than :data:`CPU_VMAP_FROM` candidates). ``chunk`` (default: :data:`CHUNK`, and
+    or "auto" (vmap on an accelerator; a loop on the CPU, one program for a process's maps and
+    searches of a scene: a map of the test ellipse's 1,378 pairs took 1.3 s so and 0.24–0.35 s
+    as a vmap in chunks of 64, whose program compiles for ~5 s more: pass batch="vmap" for
+    large or repeated maps). ``chunk`` (default: :data:`CHUNK`, and
     for "vmap" on an accelerator up to :data:`ACCELERATOR_CHUNK`, no more than the candidates)
     is one compiled program's batch there. A failed or infeasible candidate
     returns its status with quality 0 and costs only its first solve in a loop. Candidates are
@@ -347,7 +346,7 @@ def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, c
     op = scene.operator() if op is None else op
     qfn = quality_of(scene, quality)
     if batch == "auto":
-        batch = "loop" if compiler.platform() == "cpu" and len(X) < CPU_VMAP_FROM else "vmap"
+        batch = "loop" if compiler.platform() == "cpu" else "vmap"
     if batch not in ("vmap", "loop", "processes"):
         raise ValueError(f"batch={batch!r}; choose 'auto', 'vmap', 'loop' or 'processes'")
     chunk = chunk or _default_chunk(batch, len(X), compiler.platform())
