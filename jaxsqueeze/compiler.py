@@ -137,10 +137,18 @@ def precise(fun):
     """``fun`` traced with its matrix products (``@``, ``jnp.dot``, ``einsum``, and those of
     JAX's own rules, derivatives included) at :data:`MATMUL_PRECISION`, whatever the
     caller's ``jax.default_matmul_precision`` and the device's default (TF32 for float32 on
-    recent NVIDIA GPUs). Put it under a ``jax.jit``: the products are fixed when traced."""
+    recent NVIDIA GPUs). Put it under a ``jax.jit``: the products are fixed when traced.
+
+    It also names the abstract mesh in force (the empty one, unless the caller set one):
+    JAX keys its cache of traced ``jit`` functions on the context, and evaluates the
+    equations of a traced program (its derivative and batching rules) with the mesh named,
+    where a first trace had none. Under the same name, the squeeze's derivative and batching
+    rules reuse the squeeze's trace instead of tracing it again (the search's value and
+    gradient on the foam square: 3.7 → 2.8 s before XLA)."""
     @functools.wraps(fun)
     def traced(*args, **kwargs):
-        with jax.default_matmul_precision(MATMUL_PRECISION):
+        with jax.default_matmul_precision(MATMUL_PRECISION), \
+                jax.sharding.use_abstract_mesh(jax.sharding.get_abstract_mesh()):
             return fun(*args, **kwargs)
     return traced
 

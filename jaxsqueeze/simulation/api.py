@@ -151,6 +151,7 @@ def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
     or an absent placement."""
     leaves, tree = jax.tree.flatten((op, grasp))
 
+    @jax.jit
     @compiler.precise         # (the rules trace it again, later, outside the core's trace)
     def sim(*xs):
         return simulate(*jax.tree.unflatten(tree, xs), cfg)
@@ -169,6 +170,7 @@ def _one_at_a_time(fn, primals: int | None = None):
         return fn(*xs)
 
     @run.def_vmap
+    @compiler.precise
     def rule(axis_size, flags, *xs):
         every = lambda out, b: jax.tree.map(lambda _: b, out)  # noqa: E731
         if not any(flags):
@@ -200,6 +202,7 @@ def _jvp_of(fn):
     ``jvp`` in the arguments whose tangent is not a symbolic zero, batched by
     :func:`_one_at_a_time`; integer outputs get ``float0`` tangents (outside the batching
     rule: ``lax.map`` cannot carry ``float0``, so a placeholder passes through it)."""
+    @compiler.precise
     def rule(primals, tangents):
         moving = [not isinstance(t, SymbolicZero) for t in tangents]
         n = len(primals)     # (jvp keeps no tracer of this trace: its batching rule outlives it)

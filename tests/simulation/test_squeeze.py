@@ -8,6 +8,7 @@ import pytest
 
 import jaxsqueeze as jsq
 from jaxsqueeze.simulation import api as grasp_mod
+from jaxsqueeze.simulation import engine
 from physics import check_states, compiles, nearest, symmetric_square
 
 MAT = jsq.Material(E=1e5, nu=0.3, thickness=0.0254)
@@ -696,19 +697,26 @@ def test_eager_and_jitted_squeezes_agree(slanted):
 
 
 @pytest.mark.parametrize("transform", ["jit", "jacfwd", "vmap"])
-def test_the_first_squeeze_of_an_object_may_be_a_traced_one(transform):
+def test_the_first_squeeze_of_an_object_may_be_a_traced_one(transform, monkeypatch):
     """The compliance operator of a new object is built (host-side, sparse) and cached on the
     first squeeze, also when that squeeze is being traced by jit, jacfwd or vmap; it used to
     fail converting a tracer to numpy unless an eager squeeze had built it first. (Traced only,
-    not compiled: the build is what is being tested.)"""
+    not compiled: the build is what is being tested.) The engine is traced once: the
+    derivative and batching rules reuse its trace (they traced it again, once each, in a
+    context that JAX's cache told apart: a jacfwd traced it three times)."""
     mesh = jsq.shapes.disk(0.05, 0.02)       # a new object: nothing is cached for it
     grip = (nearest(mesh, (0.0, -0.05)), nearest(mesh, (0.0, 0.05)))
+    new_loop_bound = jsq.Settings(max_steps=401 + ["jit", "jacfwd", "vmap"].index(transform))  # no trace to reuse
     sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254),
-                   fingers=jsq.Fingers(radius=0.012), grip=grip, friction=0.3, depth=0.008)
+                   fingers=jsq.Fingers(radius=0.012), grip=grip, friction=0.3, depth=0.008,
+                   settings=new_loop_bound)
+    traces = []
+    monkeypatch.setattr(grasp_mod, "simulate", lambda *a: traces.append(a) or engine.simulate(*a))
     f = lambda mu: jsq.squeeze(sc.replace(friction=mu)).grip_force  # noqa: E731
     g = {"jit": jax.jit(f), "jacfwd": jax.jacfwd(f), "vmap": jax.vmap(f)}[transform]
     jax.make_jaxpr(g)(np.array([0.3, 0.4]) if transform == "vmap" else 0.3)
     assert sc.operator().G.shape == (2 * len(mesh.boundary),) * 2
+    assert len(traces) == 1
 
 
 def test_a_full_event_log_ends_the_squeeze_with_event_overflow(slanted):
