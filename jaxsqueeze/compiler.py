@@ -144,7 +144,7 @@ def precise(fun):
     equations of a traced program (its derivative and batching rules) with the mesh named,
     where a first trace had none. Under the same name, the squeeze's derivative and batching
     rules reuse the squeeze's trace instead of tracing it again (the search's value and
-    gradient on the foam square: 3.7 → 2.8 s before XLA)."""
+    gradient on the foam square: 3.3–3.7 → 2.3 s before XLA)."""
     @functools.wraps(fun)
     def traced(*args, **kwargs):
         with jax.default_matmul_precision(MATMUL_PRECISION), \

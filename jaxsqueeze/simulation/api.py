@@ -151,8 +151,8 @@ def batched_simulate(op: Compliance, grasp: Grasp, cfg: Config) -> State:
     or an absent placement."""
     leaves, tree = jax.tree.flatten((op, grasp))
 
-    @jax.jit
-    @compiler.precise         # (the rules trace it again, later, outside the core's trace)
+    @jax.jit                  # traced once: the rules below reuse its trace (under precise's context)
+    @compiler.precise
     def sim(*xs):
         return simulate(*jax.tree.unflatten(tree, xs), cfg)
 
@@ -170,7 +170,7 @@ def _one_at_a_time(fn, primals: int | None = None):
         return fn(*xs)
 
     @run.def_vmap
-    @compiler.precise
+    @compiler.precise         # (the context fn's trace is cached under: it is not traced again)
     def rule(axis_size, flags, *xs):
         every = lambda out, b: jax.tree.map(lambda _: b, out)  # noqa: E731
         if not any(flags):
@@ -202,7 +202,7 @@ def _jvp_of(fn):
     ``jvp`` in the arguments whose tangent is not a symbolic zero, batched by
     :func:`_one_at_a_time`; integer outputs get ``float0`` tangents (outside the batching
     rule: ``lax.map`` cannot carry ``float0``, so a placeholder passes through it)."""
-    @compiler.precise
+    @compiler.precise         # (the context fn's trace is cached under: it is not traced again)
     def rule(primals, tangents):
         moving = [not isinstance(t, SymbolicZero) for t in tangents]
         n = len(primals)     # (jvp keeps no tracer of this trace: its batching rule outlives it)
