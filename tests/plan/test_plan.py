@@ -1053,6 +1053,23 @@ def test_a_search_keeps_its_angle_and_stops_at_a_step_that_is_not_finite(ellipse
                                optimizer=optax.chain(optax.sgd(0.02), nan_later))
 
 
+def test_vary_angle_moves_the_angle_along_the_qualitys_derivative(ellipse):
+    """optimize_placement(vary_angle=True) also moves the squeeze-direction offset: one plain
+    gradient step (optax.sgd, the angle unscaled in u) moves it by the learning rate times
+    d quality / d angle, which central differences of the quality give too."""
+    import optax
+    P, lr, a0, d = float(ellipse.curve().perimeter), 0.02, 0.1, 1e-4
+    found = jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01, a0]], optimizer=optax.sgd(lr),
+                                   steps=1, vary_angle=True, progress=False)
+    start, moved = found.history[0]
+    assert start.status == moved.status == jsq.Status.SUCCESS and not moved.undone
+    q = [jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01, a]], steps=0,
+                                progress=False).quality for a in (a0 + d, a0 - d)]     # (the same program)
+    fd = (q[0] - q[1]) / (2 * d)
+    assert abs(fd) > 0.1                              # the angle matters here
+    np.testing.assert_allclose((moved.x[2] - a0) / lr, fd, rtol=1e-6)
+
+
 def test_plot_grasp_map_names_what_it_draws():
     """plot_grasp_map(a squeeze result) failed with "'SqueezeResult' object has no attribute 's'"."""
     import matplotlib
