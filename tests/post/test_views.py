@@ -373,3 +373,32 @@ def test_post_functions_name_a_wrong_kind_of_argument(offset, tmp_path):
                  lambda: cones.grasp_stability(res, scene, tol=-1.0), lambda: cones.grasp_stability(res, scene, tol="a")):
         with pytest.raises(ValueError, match="finger must be 0|tol="):
             call()
+
+
+def test_plot_options_draw_what_they_say(offset):
+    """plot_force_profile(degrees=False, smooth=False) draws the nodal directions in radians
+    joined by straight lines (smooth: a spline through them, the same values in degrees);
+    plot_sliding_profile(degrees=False) the polar angles in radians; plot_deformed(show_nodes=False)
+    leaves out the stick and slip markers."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from jaxsqueeze.post import plots
+    scene, op, _ = offset
+    wide = scene.replace(fingers=jsq.Fingers(radius=0.1))       # wide tips: 5 nodes each, the same program
+    res = jsq.squeeze(wide, op)
+    p = views.force_profile(res, -1, 0)
+    assert len(p.s) >= 3
+    raw = plots.plot_force_profile(res, rows=-1, degrees=False, smooth=False).axes[2].lines[0]
+    np.testing.assert_allclose(raw.get_xdata(), p.s * 1e3)
+    np.testing.assert_allclose(raw.get_ydata(), p.angle)
+    assert plots.plot_force_profile(res, rows=-1, degrees=False).axes[2].get_ylabel() == "force direction [rad]"
+    smooth = plots.plot_force_profile(res, rows=-1).axes[2].lines[0]
+    xs, ys = smooth.get_xdata(), smooth.get_ydata()
+    assert len(xs) > len(p.s)
+    np.testing.assert_allclose(np.interp(p.s * 1e3, xs, ys), np.degrees(p.angle), atol=0.05)   # through the nodes
+    sliding = [plots.plot_sliding_profile(res, degrees=d).axes[0] for d in (True, False)]
+    assert sliding[1].get_ylabel() == "polar angle [rad]"
+    deg, rad = (np.concatenate([c.get_segments()[0] for c in ax.collections]) for ax in sliding)
+    np.testing.assert_allclose(deg[:, 1], np.degrees(rad[:, 1]))
+    marked = lambda fig: [ln.get_label() for ln in fig.axes[0].lines if ln.get_label().startswith(("stick", "slip"))]  # noqa: E731
+    assert marked(plots.plot_deformed(res, wide)) and not marked(plots.plot_deformed(res, wide, show_nodes=False))
