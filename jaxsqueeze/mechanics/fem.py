@@ -74,8 +74,9 @@ def _corner_stress(xy, ue, nu):
 
 @jax.jit
 @precise
-def _stress(points, triangles, u, nu):
-    return jax.vmap(_corner_stress, in_axes=(0, 0, None))(points[triangles], u[triangles], nu)
+def _stress(points, triangles, u, nu, E):
+    sig = jax.vmap(_corner_stress, in_axes=(0, 0, None))(points[triangles].astype(u.dtype), u[triangles], nu)
+    return jnp.asarray(E, sig.dtype) * sig
 
 
 def _real(x, what: str, unit: str) -> jax.Array:
@@ -83,7 +84,7 @@ def _real(x, what: str, unit: str) -> jax.Array:
     or text), integers as the default float type."""
     if is_concrete(x):
         real_array(x, what, unit)
-    x = jnp.asarray(x)
+    x = as_array(x)
     return x.astype(jnp.asarray(0.0).dtype) if jnp.issubdtype(x.dtype, jnp.integer) else x
 
 
@@ -102,9 +103,8 @@ def element_stress(mesh: Mesh, material: Material, displacement) -> jax.Array:
     if u.shape != (mesh.n, 2):
         raise ValueError(f"displacement must be (n, 2) = {(mesh.n, 2)} nodal displacements [m] of the mesh, "
                          f"got shape {u.shape}")
-    pts = jnp.asarray(mesh.points, u.dtype)
-    sig = _stress(pts, jnp.asarray(mesh.triangles), u, material.nu)
-    return jnp.asarray(material.E, sig.dtype) * sig
+    # one compiled program (eager jnp operations on host arrays compile one small program each)
+    return _stress(as_array(mesh.points), as_array(mesh.triangles), u, material.nu, material.E)
 
 
 @own_transfers
@@ -117,6 +117,11 @@ def von_mises(stress) -> jax.Array:
     if stress.ndim < 1 or stress.shape[-1] != 3:
         raise ValueError(f"stress must be plane stresses (..., 3) = (σ_xx, σ_yy, τ_xy) [Pa], e.g. from "
                          f"element_stress; got shape {stress.shape}")
+    return _von_mises(stress)
+
+
+@jax.jit
+def _von_mises(stress):
     sxx, syy, txy = stress[..., 0], stress[..., 1], stress[..., 2]
     q = sxx**2 - sxx * syy + syy**2 + 3 * txy**2
     pos = q > 0
