@@ -48,6 +48,11 @@ Ampere round float32 operands to TF32 (10-bit mantissas, relative errors ~5e-4),
 user's ``jax.default_matmul_precision`` would otherwise reach the library's products too.
 On the CPU and in float64 nothing changes.
 
+**Compiling ahead** (:meth:`TopLevelJit.compile_ahead`). XLA compiles a program on one core,
+and a map or a search runs its squeezes on one core too: the planner starts the compile of
+the program it needs next in a background thread before it runs the one it has (the CLI's
+``plan`` of the foam square, cold: 20 → 15.5 s on 2 cores; ``benchmarks/README.md``).
+
 Every choice here and in the batch rules follows :func:`platform`, the platform a computation
 runs on, so that a squeeze pinned to the CPU on a GPU machine (``with
 jax.default_device(jax.devices("cpu")[0])``) is compiled and batched as on a CPU.
@@ -181,6 +186,8 @@ class TopLevelJit:
     def __call__(self, *args, **kwargs):
         if not _top_level():
             return self.plain(*args, **kwargs)
+        if _AHEAD:                 # a compile started ahead (most likely of this program): wait for it
+            wait_ahead(self)
         with _depth(_TOP):
             return self._top()(*args, **kwargs)
 
@@ -189,9 +196,58 @@ class TopLevelJit:
         with _depth(_TOP):
             return self._top().lower(*args, **kwargs)
 
+    def compile_ahead(self, *args, **kwargs) -> None:
+        """Start the top-level compile of these arguments (what an eager call with them would
+        compile) in a background thread, and return: the caller's next work, a loop of small
+        programs that keeps one core busy, runs meanwhile. The next top-level call of this
+        function waits for it first (instead of compiling the same program a second time), as
+        does :func:`wait_ahead`. A failure is left to that call to raise; a thread whose JAX
+        context differs from the caller's (``jax.default_device``, ``jax.transfer_guard``,
+        x64 ...), whose program that call would not find, compiles nothing. The thread is not a
+        daemon: a process that ends meanwhile waits for it (XLA cannot be stopped midway)."""
+        t = threading.Thread(target=self._compile_quietly, args=(_context(), args, kwargs),
+                             name=f"compile {getattr(self, '__name__', 'program')}")
+        with _AHEAD_LOCK:
+            _AHEAD.append((self, t))
+        t.start()
+
+    def _compile_quietly(self, context, args, kwargs) -> None:
+        if _context() != context:
+            return
+        try:
+            self.lower(*args, **kwargs).compile()
+        except Exception:   # noqa: BLE001  (the call raises it, with its own message)
+            pass
+
     def _cache_size(self) -> int:
         """Compiled programs held, both variants (tests check that a call did not recompile)."""
         return self.plain._cache_size() + sum(f._cache_size() for f in self._tuned.values() if f is not self.plain)
+
+
+#: (function, thread) of the compiles started ahead and not yet waited for
+_AHEAD: list = []
+_AHEAD_LOCK = threading.Lock()
+
+
+def wait_ahead(fun: TopLevelJit | None = None) -> None:
+    """Wait for the compiles started ahead (:meth:`TopLevelJit.compile_ahead`) of ``fun``, or
+    of every function."""
+    with _AHEAD_LOCK:
+        mine = [item for item in _AHEAD if fun is None or item[0] is fun]
+        for item in mine:
+            _AHEAD.remove(item)
+    for _, t in mine:
+        t.join()
+
+
+def _context():
+    """JAX's thread-local context, the part of a traced program's cache key that a new thread
+    does not inherit (None where this JAX does not say)."""
+    try:
+        from jax._src.config import trace_context
+    except ImportError:
+        return None
+    return trace_context()
 
 
 def can_fuse() -> bool:
@@ -312,4 +368,4 @@ def jit(fun=None, **jit_kwargs):
 
 
 __all__ = ["CPU_OPTIONS", "MATMUL_PRECISION", "NO_CUSTOM_FUSIONS", "PACK_LIMIT", "TopLevelJit", "can_fuse", "in_kernel",
-           "jit", "one_kernel", "options", "precise", "top_level_trace"]
+           "jit", "one_kernel", "options", "precise", "top_level_trace", "wait_ahead"]

@@ -75,6 +75,15 @@ def _persistent_cache_stays_put():
     assert jax.config.jax_compilation_cache_dir == SHARED_CACHE, "a test moved the persistent compilation cache"
 
 
+@pytest.fixture(autouse=True)
+def _no_compile_left_running():
+    """A compile started ahead (in a background thread) ends with its test: the next test's
+    counts of traces and compiles are its own."""
+    yield
+    from jaxsqueeze import compiler
+    compiler.wait_ahead()
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _free_compiled_programs():
     """Drop this module's compiled programs when it ends. Every XLA:CPU executable holds its own

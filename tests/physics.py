@@ -1,6 +1,7 @@
 """Shared test helpers: exactly symmetric meshes and the invariants every squeeze state must hold."""
 import contextlib
 import os
+import threading
 from typing import NamedTuple
 
 import jax
@@ -208,10 +209,15 @@ def replay_events(res, frictionless=False):
 
 
 @contextlib.contextmanager
-def compiles():
-    """The XLA compiles of the ``with`` block, one event name each (``jax.monitoring``)."""
+def compiles(where: bool = False):
+    """The XLA compiles of the ``with`` block, one event name each (``jax.monitoring``); with
+    ``where``, (program name, thread name) pairs instead (a load from the persistent cache
+    counts: JAX times it as a compile)."""
     seen = []
-    listener = lambda name, secs, **kw: seen.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+
+    def listener(name, secs, fun_name=None, **kw):
+        if name.endswith("backend_compile_duration"):
+            seen.append((fun_name, threading.current_thread().name) if where else name)
     jax.monitoring.register_event_duration_secs_listener(listener)
     try:
         yield seen

@@ -1,5 +1,6 @@
 """compiler.jit: top-level calls compile with the accepted CPU options, traced calls stay plain."""
 import os
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -262,3 +263,28 @@ def test_the_installed_jax_is_the_range_pyproject_asks_for():
     assert set(str(jax_req.specifier).split(",")) == {">=0.10.2", "<0.11"}      # what the README says
     assert jax_req.specifier.contains(md.version("jax")) and jax.__version__ == md.version("jax")
     assert md.version("jaxlib").split(".")[:2] == md.version("jax").split(".")[:2]
+
+
+def test_a_compile_started_ahead_is_the_one_the_next_call_runs():
+    """``compile_ahead`` compiles the program of a later top-level call in a background thread:
+    the call then compiles nothing itself. A compile ahead that fails leaves its error to the
+    call, and one started under a thread-local JAX context (which its thread would not share)
+    compiles nothing."""
+    from physics import compiles
+    me = threading.current_thread().name
+    f = compiler.jit(lambda x, k: jnp.cos(x) * k + 0.25, static_argnums=(1,))     # no other test's program
+    x = jnp.linspace(0.0, 1.0, 7)
+    with compiles(where=True) as compiled:
+        f.compile_ahead(x, 3.0)
+        y = f(x, 3.0)
+    np.testing.assert_allclose(y, jnp.cos(x) * 3.0 + 0.25, rtol=1e-15)
+    assert compiled and all(thread == "compile <lambda>" for _, thread in compiled), compiled
+    f.compile_ahead(x, "three")                  # fails in its thread, quietly
+    with pytest.raises(TypeError):
+        f(x, "three")
+    with compiles(where=True) as compiled, jax.default_matmul_precision("float32"):
+        f.compile_ahead(x, 4.0)
+        compiler.wait_ahead()
+        assert compiled == []
+        f(x, 4.0)
+    assert compiled and all(thread == me for _, thread in compiled), compiled

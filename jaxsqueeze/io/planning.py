@@ -88,10 +88,12 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
 
     import jaxsqueeze as jsq
     from ..plan import quality as Q
-    from ..plan.search import check_search, grasp_map, grid, optimize_placement, quality_of, unit_step
+    from ..plan.search import (check_search, compile_search_ahead, grasp_map, grid, optimize_placement, quality_of,
+                               unit_step)
     from ..post import plots as figures
     from ..post.maps import plot_grasp_map
     from ..post.views import json_ready
+    from ..simulation import api
     from ..simulation.scene import Adversary, Placement
 
     P = float(scene.curve().perimeter)
@@ -135,7 +137,10 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
     if settings.push >= float(op.length):
         raise ValueError(f"plan.push: expected a push [m] shorter than the object ({float(op.length):.4g} m), "
                          f"got {settings.push}")
+    compile_search_ahead(scene, name, op)      # compiles on the other core while the map runs
     gmap = grasp_map(scene, name, spacing=spacing, op=op, progress=progress, keep=settings.starts)
+    if len(gmap.best):                          # the best grasp's squeeze, while the search runs
+        api.compile_ahead(scene.replace(placement=Placement(s=gmap.best[0, :2], angle=gmap.best[0, 2])), op)
     found = optimize_placement(scene, name, optimizer=opt, steps=settings.steps, starts=settings.starts,
                                init=gmap.best[:settings.starts] if len(gmap.best) else None, op=op,
                                progress=progress)

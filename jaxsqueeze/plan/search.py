@@ -225,6 +225,22 @@ def _value_and_grad(scene, qfn, op, u, scale):
     return s, g
 
 
+def _scale(scene: Scene) -> np.ndarray:
+    """(3,) the search's scaled coordinates u = x * scale: (2π s_0 / P, 2π s_1 / P, angle) [rad],
+    P the perimeter [m]."""
+    P = float(scene.curve().perimeter)
+    return np.array([2 * math.pi / P, 2 * math.pi / P, 1.0])
+
+
+def compile_search_ahead(scene: Scene, quality, op) -> None:
+    """Start compiling the program of :func:`optimize_placement`'s first steps on ``scene``
+    (``quality`` a name or a function; ``op`` its operator) in a background thread
+    (:meth:`jaxsqueeze.compiler.TopLevelJit.compile_ahead`): a map run meanwhile keeps one
+    core busy, and the search's first step finds the program compiled."""
+    _value_and_grad.compile_ahead(quick(scene), quality_of(scene, quality), dataclasses.replace(op, field=None),
+                                  jnp.asarray(np.zeros(3) * _scale(scene)), jnp.asarray(_scale(scene)))
+
+
 def quick(scene: Scene) -> Scene:
     """The scene with its automatic capacities (``Settings.capacity`` / ``sliding_capacity``
     at None) fixed where an eager squeeze starts them (32 contact slots, one Newton system of
@@ -614,8 +630,10 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     op = _check(scene, np.zeros((1, 3)) if init is None else init, op, everywhere=True)
     qfn = quality_of(scene, quality)
     P = float(scene.curve().perimeter)
-    scale = np.array([2 * math.pi / P, 2 * math.pi / P, 1.0])
+    scale = _scale(scene)
     optimizer = optax.adam(0.02) if optimizer is None else optimizer
+    scale_ = jnp.asarray(scale)
+    fast = quick(scene)
     squeezes = 0
     screened = 0
     if init is None:
@@ -631,6 +649,8 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
                 raise ValueError(f"budget={budget} squeezes is spent before the search starts (the coarse map "
                                  f"squeezes the {len(X)} pairs that pass the cone test, and each start needs at "
                                  "least 1 more): raise the budget, or use a coarser coarse_spacing")
+            if len(X):
+                compile_search_ahead(scene, qfn, op)        # on the other core, while the map runs
             summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
         squeezes += len(X)
         ok = np.zeros(0, bool) if summ is None else summ.status == Status.SUCCESS
@@ -649,9 +669,6 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
                              f"{len(init)} starts needs at least 1): raise the budget, or use fewer starts"
                              + (" or a coarser coarse_spacing" if squeezes else " (rows of init)"))
     mask = np.array([1.0, 1.0, 1.0 if vary_angle else 0.0])
-
-    scale_ = jnp.asarray(scale)
-    fast = quick(scene)
 
     def value_and_grad(u):       # the quick capacities first, then as evaluate does (_again)
         run = fast

@@ -446,6 +446,21 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     return res
 
 
+def compile_ahead(scene: Scene, op: Compliance | None = None, history: bool = True) -> None:
+    """Start compiling the program of an eager ``squeeze(scene, op=op, history=history)`` in a
+    background thread (:meth:`jaxsqueeze.compiler.TopLevelJit.compile_ahead`), while the
+    caller goes on: that squeeze (or one of another grip or placement of the same object and
+    settings) then finds it compiled. A scene that the squeeze would reject starts nothing
+    (the squeeze says why)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")         # (the squeeze says them)
+            op, grasp = _prepare(scene, op, True)
+    except (ValueError, TypeError):
+        return
+    _run.compile_ahead(dataclasses.replace(op, field=None), grasp, eager_config(scene, op, history))
+
+
 def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
     """(operator, grasp) of a squeeze of ``scene``; with ``concrete`` (an eager call) after
     every eager check, each raising ``ValueError`` that names the field (and warning of mixed

@@ -39,13 +39,20 @@ push = 0.002
 """
 
 
-def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys):
+def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys, monkeypatch):
     path = tmp_path / "scene.toml"
     path.write_text(SCENE)
     out = tmp_path / "plan"
+    from jaxsqueeze import compiler
+    started, ahead = [], compiler.TopLevelJit.compile_ahead
+    monkeypatch.setattr(compiler.TopLevelJit, "compile_ahead",
+                        lambda self, *a, **kw: started.append(self.__name__) or ahead(self, *a, **kw))
     with jax.transfer_guard("disallow"):    # (JAX_TRANSFER_GUARD=disallow: every transfer is the program's own)
         code = cli.main(["plan", str(path), "--out", str(out), "-q"])
     assert code == 0, capsys.readouterr().err
+    # the search's program compiles while the map runs, the best grasp's while the search runs
+    # (here in a thread that compiles nothing: it does not share the test's transfer guard)
+    assert started == ["_value_and_grad", "_run"]
     s = json.loads((out / "summary.json").read_text())
     assert s["quality"] == "adversary_work" and s["best"]["status"] == "SUCCESS"
     assert s["best"]["adversary_work_J"] > 0

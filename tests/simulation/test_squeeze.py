@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import jaxsqueeze as jsq
+from jaxsqueeze import compiler
 from jaxsqueeze.simulation import api as grasp_mod
 from jaxsqueeze.simulation import engine
 from physics import check_states, compiles, nearest, symmetric_square
@@ -343,6 +344,26 @@ def test_a_second_eager_squeeze_compiles_nothing(slanted):
     with compiles() as compiled:
         res = jsq.squeeze(slanted.replace(friction=0.25, depth=0.011))
     assert res.displacement is not None and res.displacement.shape == slanted.mesh.points.shape
+    assert compiled == []
+
+
+def test_a_squeeze_compiled_ahead_compiles_nothing_when_it_runs(mesh, slanted):
+    """``api.compile_ahead`` (the CLI's ``plan`` starts it for the best grasp while its search
+    runs) compiles an eager squeeze's program in a background thread: a squeeze of the same
+    object with another grip and other numbers then finds it compiled. A scene that the squeeze
+    refuses starts nothing."""
+    sc = slanted.replace(settings=jsq.Settings(max_steps=397))    # a loop bound no other test compiles
+    with compiles(where=True) as compiled:
+        grasp_mod.compile_ahead(sc)
+        other = (nearest(mesh, (0.004, -0.05)), nearest(mesh, (-0.004, 0.05)))
+        res = jsq.squeeze(sc.replace(grip=other, friction=0.3))
+    assert res.outcome == jsq.Status.SUCCESS
+    assert [thread for name, thread in compiled if name == "jit(_run)"] == ["compile _run"], compiled
+    with compiles(where=True) as compiled:
+        softer = sc.replace(material=jsq.Material(E=1e5, nu=0.45, thickness=0.0254),
+                            settings=jsq.Settings(max_steps=398))
+        grasp_mod.compile_ahead(softer, op=sc.operator())           # an operator of nu = 0.3
+        compiler.wait_ahead()
     assert compiled == []
 
 
