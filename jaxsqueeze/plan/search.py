@@ -237,8 +237,9 @@ def compile_search_ahead(scene: Scene, quality, op) -> None:
     (``quality`` a name or a function; ``op`` its operator) in a background thread
     (:meth:`jaxsqueeze.compiler.TopLevelJit.compile_ahead`): a map run meanwhile keeps one
     core busy, and the search's first step finds the program compiled."""
+    scale = _scale(scene)
     _value_and_grad.compile_ahead(quick(scene), quality_of(scene, quality), dataclasses.replace(op, field=None),
-                                  jnp.asarray(np.zeros(3) * _scale(scene)), jnp.asarray(_scale(scene)))
+                                  jnp.asarray(np.zeros(3) * scale), jnp.asarray(scale))
 
 
 def quick(scene: Scene) -> Scene:
@@ -632,8 +633,6 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     P = float(scene.curve().perimeter)
     scale = _scale(scene)
     optimizer = optax.adam(0.02) if optimizer is None else optimizer
-    scale_ = jnp.asarray(scale)
-    fast = quick(scene)
     squeezes = 0
     screened = 0
     if init is None:
@@ -669,6 +668,9 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
                              f"{len(init)} starts needs at least 1): raise the budget, or use fewer starts"
                              + (" or a coarser coarse_spacing" if squeezes else " (rows of init)"))
     mask = np.array([1.0, 1.0, 1.0 if vary_angle else 0.0])
+
+    scale_ = jnp.asarray(scale)
+    fast = quick(scene)
 
     def value_and_grad(u):       # the quick capacities first, then as evaluate does (_again)
         run = fast
