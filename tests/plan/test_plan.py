@@ -929,7 +929,7 @@ def test_maps_and_searches_redo_what_runs_out_of_steps_with_longer_bounds(ellips
     # a search step: quick capacities, longer bounds, then the scene's own where those overflow
     ran = []
 
-    def step(scene, qfn, op, u, scale):
+    def step(scene, qfn, op, u, scale, vary_angle):
         ran.append(bounds(scene)[:2])
         st = {(32, None): M, (32, 1600): O}.get(ran[-1], S)
         summary = search.Summary(jnp.array(st), jnp.array(1.0), jnp.array(1.0), jnp.array(0.003), jnp.array(0.1))
@@ -1060,18 +1060,23 @@ def test_a_search_keeps_its_angle_and_stops_at_a_step_that_is_not_finite(ellipse
 def test_vary_angle_moves_the_angle_along_the_qualitys_derivative(ellipse):
     """optimize_placement(vary_angle=True) also moves the squeeze-direction offset: one plain
     gradient step (optax.sgd, the angle unscaled in u) moves it by the learning rate times
-    d quality / d angle, which central differences of the quality give too."""
+    d quality / d angle, which central differences of the quality give too. Without it the
+    search differentiates in the arc lengths only (one tangent fewer) and steps them alike."""
     import optax
     P, lr, a0, d = float(ellipse.curve().perimeter), 0.02, 0.1, 1e-4
     found = jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01, a0]], optimizer=optax.sgd(lr),
                                    steps=1, vary_angle=True, progress=False)
     start, moved = found.history[0]
     assert start.status == moved.status == jsq.Status.SUCCESS and not moved.undone
-    q = [jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01, a]], steps=0,
+    q = [jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01, a]], steps=0, vary_angle=True,
                                 progress=False).quality for a in (a0 + d, a0 - d)]     # (the same program)
     fd = (q[0] - q[1]) / (2 * d)
     assert abs(fd) > 0.1                              # the angle matters here
     np.testing.assert_allclose((moved.x[2] - a0) / lr, fd, rtol=1e-6)
+    kept = jsq.optimize_placement(ellipse, "grip_force", init=[[0.0, P / 2 + 0.01, a0]], optimizer=optax.sgd(lr),
+                                  steps=1, progress=False).history[0][1]
+    assert kept.x[2] == a0 and kept.status == jsq.Status.SUCCESS
+    np.testing.assert_allclose(kept.x[:2], moved.x[:2], rtol=1e-12, atol=0)
 
 
 def test_plot_grasp_map_names_what_it_draws():
