@@ -632,6 +632,8 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     import optax
 
     check_search(optimizer, steps, starts, budget, init)
+    if not isinstance(vary_angle, (bool, np.bool_)):            # ("False", a string, is true)
+        raise TypeError(f"vary_angle={vary_angle!r} must be True or False")
     init = None if init is None else candidates(init, "init")
     op = _check(scene, np.zeros((1, 3)) if init is None else init, op, everywhere=True)
     qfn = quality_of(scene, quality)
