@@ -139,11 +139,16 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
                          f"got {settings.push}")
     compile_search_ahead(scene, name, op)      # compiles on the other core while the map runs
     gmap = grasp_map(scene, name, spacing=spacing, op=op, progress=progress, keep=settings.starts)
-    if len(gmap.best):                          # the best grasp's squeeze, while the search runs
-        api.compile_ahead(scene.replace(placement=Placement(s=gmap.best[0, :2], angle=gmap.best[0, 2])), op)
+    if not len(gmap.best):                      # nothing to search from
+        seen = ", ".join(f"{jsq.Status(int(k)).name} {int(c)}" for k, c in
+                         zip(*np.unique(gmap.status[~np.eye(len(gmap.s), dtype=bool)], return_counts=True)))
+        raise ValueError(f"no feasible grasp on the map of {len(gmap.s)} positions {gmap.s[1] - gmap.s[0]:.4g} m "
+                         f"apart (ordered pairs: {seen}): use a finer plan.spacing, or change the scene (more "
+                         "friction, other fingertips, a shallower squeeze)")
+    # the best grasp's squeeze compiles while the search runs
+    api.compile_ahead(scene.replace(placement=Placement(s=gmap.best[0, :2], angle=gmap.best[0, 2])), op)
     found = optimize_placement(scene, name, optimizer=opt, steps=settings.steps, starts=settings.starts,
-                               init=gmap.best[:settings.starts] if len(gmap.best) else None, op=op,
-                               progress=progress)
+                               init=gmap.best[:settings.starts], op=op, progress=progress)
     best = scene.replace(placement=found.best)
     res = jsq.squeeze(best, op=op)
     os.makedirs(out, exist_ok=True)

@@ -64,12 +64,24 @@ def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys, monkeypatch):
     assert "warning: boundary edges" not in capsys.readouterr().err            # -q
     # --no-plots (a smaller plan, on the compiled programs of this one): no figures
     small = tmp_path / "small.toml"
-    small.write_text(SCENE.replace("spacing = 0.03", "spacing = 0.08").replace("starts = 2", "starts = 1").replace(
-        "steps = 3", "steps = 1"))
+    small.write_text(SCENE.replace("starts = 2", "starts = 1").replace("steps = 3", "steps = 1"))
     bare = tmp_path / "bare"
     assert cli.main(["plan", str(small), "--out", str(bare), "-q", "--no-plots"]) == 0
     assert sorted(p.name for p in bare.iterdir()) == ["summary.json"]
     assert json.loads((bare / "summary.json").read_text())["files"] == {}
+
+
+def test_a_map_without_a_feasible_grasp_is_an_input_error_that_says_why(tmp_path, capsys):
+    """No feasible cell on the map (three positions, none nearly opposite, μ = 0.2): the search ran a
+    coarse map of its own, which found nothing either, and said "no feasible placement on the
+    coarse map ... pass a finer coarse_spacing". Now exit 2 after the map, with its statuses."""
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE.replace("spacing = 0.03", "spacing = 0.1").replace("friction = 0.5", "friction = 0.2"))
+    code = cli.main(["plan", str(path), "--out", str(tmp_path / "o"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("error: no feasible grasp on the map of 3 positions"), err
+    assert "(ordered pairs: INFEASIBLE_GRIP 6)" in err and "use a finer plan.spacing" in err, err
+    assert not (tmp_path / "o").exists()
 
 
 def test_plan_table_errors_name_the_key(tmp_path, capsys):
