@@ -330,7 +330,8 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     op = _check(scene, X, op)
     if batch != "processes":       # (the workers of "processes" loop through this function)
         fast = quick(scene)
-        summ = _evaluate(fast, X, quality, op, batch, chunk, progress, processes, cache)
+        grown = _again(scene, fast, Status.OVERFLOW, 0.0)       # (compiled ahead at a loop's first overflow)
+        summ = _evaluate(fast, X, quality, op, batch, chunk, progress, processes, cache, grown)
         todo = [(fast, np.arange(len(X)))]
         while todo:
             run, idx = todo.pop()
@@ -363,8 +364,10 @@ def _default_chunk(batch: str, n: int, plat: str) -> int:
     return min(ACCELERATOR_CHUNK, max(n, 1)) if batch == "vmap" and plat != "cpu" else CHUNK
 
 
-def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, cache) -> Summary:
-    """:func:`evaluate` with the scene's capacities as they are."""
+def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, cache, grown=None) -> Summary:
+    """:func:`evaluate` with the scene's capacities as they are. ``grown``: the scene that
+    candidates which overflow them will be squeezed again with, whose program a loop starts
+    compiling in the background at the first overflow (the rest of the loop runs meanwhile)."""
     op = scene.operator() if op is None else op
     qfn = quality_of(scene, quality)
     if batch == "auto":
@@ -382,6 +385,9 @@ def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, c
     if batch == "loop":
         for k, x in enumerate(X):
             out.append(jax.tree.map(lambda a: np.asarray(a)[None], _one(scene, qfn, op, jnp.asarray(x))))
+            if grown is not None and out[-1].status[0] == Status.OVERFLOW:
+                _one.compile_ahead(grown, qfn, op, jnp.asarray(x))
+                grown = None
             if progress and (k % 16 == 15 or k == len(X) - 1):
                 _progress(k + 1, len(X), t0, "grasp map")
         return Summary(*(np.concatenate(a) for a in zip(*out)))

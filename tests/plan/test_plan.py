@@ -871,9 +871,15 @@ def test_maps_squeeze_with_quick_capacities_and_redo_what_overflows(ellipse, mon
     monkeypatch.setattr(scene_mod, "EAGER_SLOTS", 2)          # every candidate overflows 2 slots
     assert search._evaluate(search.quick(ellipse), X, "squeeze_work", op, "loop", 64, False, None,
                             True).status.tolist() == [jsq.Status.OVERFLOW] * 3
+    from jaxsqueeze import compiler
+    started, ahead = [], compiler.TopLevelJit.compile_ahead
+    monkeypatch.setattr(compiler.TopLevelJit, "compile_ahead",
+                        lambda self, *a, **kw: started.append(a[0].settings.capacity) or ahead(self, *a, **kw))
     redone = plan.evaluate(ellipse, X, op=op, batch="loop", progress=False)
     np.testing.assert_array_equal(redone.status, own.status)
     np.testing.assert_array_equal(redone.quality, own.quality)
+    # the first overflow started compiling the scene's own program; the loop went on meanwhile
+    assert started == [ellipse.settings.capacity]
 
 
 def test_maps_and_searches_redo_what_runs_out_of_steps_with_longer_bounds(ellipse, monkeypatch):
@@ -911,7 +917,7 @@ def test_maps_and_searches_redo_what_runs_out_of_steps_with_longer_bounds(ellips
 
     calls = []
 
-    def fake(scene, X, quality, op, batch, chunk, progress, processes, cache):
+    def fake(scene, X, quality, op, batch, chunk, progress, processes, cache, grown=None):
         ks = np.rint(X[:, 0] * 1e3).astype(int)
         calls.append((bounds(scene), batch, ks.tolist()))
         st = np.array([outcome(k, *bounds(scene)) for k in ks])
