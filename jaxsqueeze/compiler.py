@@ -202,8 +202,9 @@ class TopLevelJit:
         programs that keeps one core busy, runs meanwhile. The next top-level call of this
         function waits for it first (instead of compiling the same program a second time), as
         does :func:`wait_ahead`. A failure is left to that call to raise; a thread whose JAX
-        context differs from the caller's (``jax.default_device``, ``jax.transfer_guard``,
-        x64 ...), whose program that call would not find, compiles nothing. The thread is not a
+        context differs from the caller's (``jax.default_device``,
+        ``jax.default_matmul_precision`` ...), whose program that call would not find,
+        compiles nothing. The thread is not a
         daemon: a process that ends meanwhile waits for it (XLA cannot be stopped midway)."""
         t = threading.Thread(target=self._compile_quietly, args=(_context(), args, kwargs),
                              name=f"compile {getattr(self, '__name__', 'program')}")
@@ -211,6 +212,7 @@ class TopLevelJit:
             _AHEAD.append((self, t))
         t.start()
 
+    @own_transfers                 # (the library's own work, under a global jax_transfer_guard)
     def _compile_quietly(self, context, args, kwargs) -> None:
         if _context() != context:
             return

@@ -51,7 +51,6 @@ def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys, monkeypatch):
         code = cli.main(["plan", str(path), "--out", str(out), "-q"])
     assert code == 0, capsys.readouterr().err
     # the search's program compiles while the map runs, the best grasp's while the search runs
-    # (here in a thread that compiles nothing: it does not share the test's transfer guard)
     assert started == ["_value_and_grad", "_run"]
     s = json.loads((out / "summary.json").read_text())
     assert s["quality"] == "adversary_work" and s["best"]["status"] == "SUCCESS"
