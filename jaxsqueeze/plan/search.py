@@ -264,6 +264,12 @@ def _capacities(scene: Scene):
     return scene.settings.capacity, scene.settings.sliding_capacity
 
 
+def _run_key(scene: Scene):
+    """The settings that tell the programs of :func:`quick` and :func:`_again` scenes apart."""
+    s = scene.settings
+    return s.capacity, s.sliding_capacity, s.max_steps, s.max_events
+
+
 def _again(scene: Scene, run: Scene, status: int, depth: float) -> Scene | None:
     """The scene to squeeze a candidate of ``scene`` again with, after squeezing it with ``run``
     (first :func:`quick`) ended with ``status`` at the depth ``depth`` [m], or None: on
@@ -322,6 +328,12 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     chunk (each 16 squeezes of a loop) where stderr is a terminal or a Jupyter notebook's
     (:func:`jaxsqueeze.batch.interactive`).
     """
+    return _evaluate_with_runs(scene, X, quality, op, batch, chunk, progress, processes, cache)[0]
+
+
+def _evaluate_with_runs(scene: Scene, X, quality, op, batch, chunk, progress, processes, cache):
+    """(:func:`evaluate`'s summaries, for each candidate the scene whose settings gave its
+    summary: :func:`quick` or what :func:`_again` made of it; None with batch="processes")."""
     X = candidates(X)
     if chunk is not None:
         _check_count("chunk", chunk, 1)
@@ -332,6 +344,7 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
         fast = quick(scene)
         grown = _again(scene, fast, Status.OVERFLOW, 0.0)       # (compiled ahead at a loop's first overflow)
         summ = _evaluate(fast, X, quality, op, batch, chunk, progress, processes, cache, grown)
+        runs = [fast] * len(X)
         todo = [(fast, np.arange(len(X)))]
         while todo:
             run, idx = todo.pop()
@@ -339,9 +352,7 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
             for k in idx:
                 nxt = _again(scene, run, int(summ.status[k]), float(summ.depth[k]))
                 if nxt is not None:
-                    s = nxt.settings
-                    key = (s.capacity, s.sliding_capacity, s.max_steps, s.max_events)
-                    groups.setdefault(key, (nxt, []))[1].append(k)
+                    groups.setdefault(_run_key(nxt), (nxt, []))[1].append(k)
             for nxt, ks in groups.values():
                 ks = np.asarray(ks)
                 # longer bounds one candidate at a time (a vmap of thousands of rows each would
@@ -350,11 +361,14 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
                 again = _evaluate(nxt, X[ks], quality, op, "loop" if longer else batch, chunk, False, processes, cache)
                 for a, b in zip(summ, again):
                     a[ks] = b
+                for k in ks:
+                    runs[k] = nxt
                 todo.append((nxt, ks))
     else:
         summ = _evaluate(scene, X, quality, op, batch, chunk, progress, processes, cache)
+        runs = [None] * len(X)
     _check_quality(summ, X)
-    return summ
+    return summ, runs
 
 
 def _default_chunk(batch: str, n: int, plat: str) -> int:
@@ -633,7 +647,9 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
             quality so far) on stderr, where it is a terminal or a Jupyter notebook's.
     Forward-mode gradients (``jax.jacfwd``) of the quality; a step that lands on a failed or
     infeasible placement is undone and the step scale halved (the constraint is the status;
-    its margin is in the history). Returns a :class:`Search`.
+    its margin is in the history). Steps squeeze as a map does (:func:`evaluate`: the quick
+    capacities first, more where they run out); a start from the coarse map begins with what
+    its cell needed, and a start keeps what it grew to. Returns a :class:`Search`.
     """
     import optax
 
@@ -648,6 +664,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     optimizer = optax.adam(0.02) if optimizer is None else optimizer
     squeezes = 0
     screened = 0
+    start_runs = None
     if init is None:
         # the coarse map, screened: only pairs whose first contacts pass the cone test (the
         # approach and Section I-A's test, no squeeze) are squeezed
@@ -663,11 +680,13 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
                                  "least 1 more): raise the budget, or use a coarser coarse_spacing")
             if len(X):
                 compile_search_ahead(scene, qfn, op, vary_angle)        # on the other core, while the map runs
-            summ = evaluate(scene, X, qfn, op=op, progress=progress) if len(X) else None
+            summ, runs = _evaluate_with_runs(scene, X, qfn, op, "auto", None, progress, None, True) if len(X) \
+                else (None, [])
         squeezes += len(X)
         ok = np.zeros(0, bool) if summ is None else summ.status == Status.SUCCESS
         order = np.argsort(-np.where(ok, summ.quality, -np.inf)) if len(X) else np.zeros(0, int)
-        init = X[order[ok[order]]][:starts]
+        best = order[ok[order]][:starts]
+        init, start_runs = X[best], [runs[i] for i in best]
         if len(init) == 0:
             seen = "no pair passed the cone test" if summ is None else ", ".join(
                 f"{Status(int(k)).name} {int(c)}" for k, c in zip(*np.unique(summ.status, return_counts=True)))
@@ -685,21 +704,25 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     scale_ = jnp.asarray(scale)
     fast = quick(scene)
     turn = bool(vary_angle)
+    # a start squeezes with what its cell of the coarse map needed (else the quick capacities)
+    start_runs = [fast if r is None else r for r in (start_runs or [None] * len(init))]
+    for r in {_run_key(r): r for r in start_runs if _run_key(r) != _run_key(fast)}.values():
+        _value_and_grad.compile_ahead(r, qfn, op, jnp.asarray(init[0] * scale), scale_, turn)
 
-    def value_and_grad(u):       # the quick capacities first, then as evaluate does (_again)
-        run = fast
+    def value_and_grad(u, run):  # from run, then as evaluate does (_again); and the run that did
         s, g = _value_and_grad(run, qfn, op, u, scale_, turn)
-        while (run := _again(scene, run, int(s.status), float(s.depth))) is not None:
+        while (nxt := _again(scene, run, int(s.status), float(s.depth))) is not None:
+            run = nxt
             s, g = _value_and_grad(run, qfn, op, u, scale_, turn)
         _check_quality(jax.tree.map(lambda a: np.asarray(a)[None], s), np.asarray(u)[None] / scale)
-        return s, g
+        return s, g, run
 
     histories, best_x, best_q = [], None, -np.inf
     for k, x0 in enumerate(init):
         u = jnp.asarray(x0 * scale)
         with _optax_promotion():
             state = optimizer.init(u)
-        s, g = value_and_grad(u)
+        s, g, run = value_and_grad(u, start_runs[k])
         squeezes += 1
         step = lambda u, s, g, undone=False: Step(np.asarray(u) / scale, float(s.quality),  # noqa: E731
                                                   float(jnp.linalg.norm(g * mask)), int(s.status), undone)
@@ -719,13 +742,14 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
                                  "not finite. Check the quality function's derivatives, or the optimizer's settings "
                                  "(optax.adam needs eps > 0)")
             u_new = u + damp * updates
-            s_new, g_new = value_and_grad(u_new)
+            s_new, g_new, run_new = value_and_grad(u_new, run)
             squeezes += 1
             if int(s_new.status) != Status.SUCCESS and ok:
                 damp *= 0.5                 # stepped onto a failed / infeasible placement: undo
                 hist.append(step(u_new, s_new, g_new, undone=True))
                 continue
-            u, state, s, g = u_new, new_state, s_new, g_new
+            # a start keeps the capacities and bounds it grew to (its steps are near each other)
+            u, state, s, g, run = u_new, new_state, s_new, g_new, run_new
             hist.append(step(u, s, g))
         if int(s.status) == Status.SUCCESS and float(s.quality) > best_q:
             best_q, best_x = float(s.quality), np.asarray(u) / scale

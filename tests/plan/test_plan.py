@@ -946,6 +946,33 @@ def test_maps_and_searches_redo_what_runs_out_of_steps_with_longer_bounds(ellips
     monkeypatch.setattr(search, "_value_and_grad", step)
     best = jsq.optimize_placement(fine, "squeeze_work", init=X[:1], steps=0, progress=False)
     assert ran == [(32, None), (32, 1600), (None, 1600)] and best.history[0][0].status == S
+    # a start keeps what it grew to: its next steps squeeze with that at once
+    ran.clear()
+    jsq.optimize_placement(fine, "squeeze_work", init=X[:1], steps=2, progress=False)
+    assert ran == [(32, None), (32, 1600), (None, 1600), (None, 1600), (None, 1600)]
+
+    # a search from its coarse map starts where the start's cell ended (here the scene's own
+    # capacities), that program compiled ahead like the quick one
+    summ, runs = search._evaluate_with_runs(fine, X, "squeeze_work", fine.operator(), "vmap", None, False, None, True)
+    assert [bounds(r) for r in runs] == [(32, None, None), (32, 1600, 1024), (None, 1600, 1024), (32, 6400, 4096)]
+    ahead = []
+
+    class Stand:                         # the stand-in program, with compile_ahead
+        __call__ = staticmethod(step)
+
+        def compile_ahead(self, scene, *args):
+            ahead.append(bounds(scene)[:2])
+
+    def coarse(scene, X, *args):         # every cell feasible, the last one best, after growing
+        n = len(X)
+        cells = search.Summary(np.full(n, S), np.arange(n, dtype=float), np.ones(n), np.full(n, 0.003), np.ones(n))
+        return cells, [fast] * (n - 1) + [search._again(fine, fast, O, 0.0)]
+
+    monkeypatch.setattr(search, "_value_and_grad", Stand())
+    monkeypatch.setattr(search, "_evaluate_with_runs", coarse)
+    ran.clear()
+    jsq.optimize_placement(fine, "squeeze_work", starts=1, steps=0, progress=False)
+    assert ahead == [(32, None), (None, None)] and ran == [(None, None)]
 
 
 PLANNING_OBJECTS = {     # coarse meshes: a fine exhaustive map at node spacing stays affordable in a test
