@@ -37,6 +37,15 @@ def holds_bool(x) -> bool:
     return isinstance(x, (list, tuple)) and any(holds_bool(v) for v in x)
 
 
+def flag(x, what: str) -> bool:
+    """``x`` as a bool when it is ``True`` or ``False`` (Python or NumPy); else ``TypeError``
+    naming ``what``. A string such as "False" is true to Python and would silently switch the
+    option on, and 0/1 are refused rather than guessed."""
+    if not isinstance(x, (bool, np.bool_)):
+        raise TypeError(f"{what}={x!r:.60} must be True or False")
+    return bool(x)
+
+
 def positive(x, what: str, unit: str = "") -> float:
     """``x`` as a float when it is one finite real number > 0; else ``ValueError`` naming
     ``what`` (and its ``unit``). Booleans, text, complex numbers and arrays of more than one

@@ -25,7 +25,7 @@ import numpy as np
 from .. import compiler
 from ..batch import interactive
 from ..geometry.mesh import Mesh
-from ..numbers import kind, real_array
+from ..numbers import flag, kind, real_array
 from ..simulation import validate
 from ..simulation.api import squeeze
 from ..simulation.scene import Placement, Scene
@@ -530,7 +530,7 @@ def candidate_pairs(scene: Scene, spacing=None, angle: float = 0.0, op=None, ord
     from ..simulation import api
 
     s = grid(scene, spacing)
-    i, j = _pairs(len(s), ordered)
+    i, j = _pairs(len(s), flag(ordered, "ordered"))
     X = np.stack([s[i], s[j], np.full(len(i), _check_angle(angle))], 1)
     op = _check(scene, X, op)
     m = np.asarray(_margins(scene, op, api.config_of(_placed(scene, X[0])), jnp.asarray(X)))
@@ -654,8 +654,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     import optax
 
     check_search(optimizer, steps, starts, budget, init)
-    if not isinstance(vary_angle, (bool, np.bool_)):            # ("False", a string, is true)
-        raise TypeError(f"vary_angle={vary_angle!r} must be True or False")
+    vary_angle = flag(vary_angle, "vary_angle")
     init = None if init is None else candidates(init, "init")
     op = _check(scene, np.zeros((1, 3)) if init is None else init, op, everywhere=True)
     qfn = quality_of(scene, quality)

@@ -22,6 +22,7 @@ from .. import compiler
 from ..tracing import as_array, differentiated, forward_levels, is_concrete, own_transfers, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement, field_on_host
 from ..geometry.mesh import Mesh
+from ..numbers import flag
 from .scene import EVENTS, LOG_GROWTH, STEPS, Scene, stiffness_of
 from .status import Status
 
@@ -387,6 +388,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
     gives ``Status.INVALID_INPUT`` with ``result.invalid`` naming the field.
     """
     check_types(scene, op)
+    throw, trim, history = flag(throw, "throw"), flag(trim, "trim"), flag(history, "history")
     if reverse_mode((scene, op)):
         raise TypeError(REVERSE_MODE)
     if forward_levels((scene, op)) > 1:      # (through a user's jit: _first_order_only, in _run)
@@ -452,6 +454,7 @@ def compile_ahead(scene: Scene, op: Compliance | None = None, history: bool = Tr
     caller goes on: that squeeze (or one of another grip or placement of the same object and
     settings) then finds it compiled. A scene that the squeeze would reject starts nothing
     (the squeeze says why)."""
+    history = flag(history, "history")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")         # (the squeeze says them)

@@ -836,6 +836,8 @@ def test_a_map_squeezes_both_finger_orders_when_the_fingers_differ(ellipse):
     np.testing.assert_allclose(gm.quality[i, j], direct.quality, rtol=1e-12)
     assert np.max(np.abs(gm.quality[i, j] - gm.quality[j, i]) / np.abs(gm.quality[i, j])) > 0.01
     assert len(plan.candidate_pairs(turning, P / 6, ordered=True)) == 2 * len(plan.candidate_pairs(turning, P / 6))
+    with pytest.raises(TypeError, match="ordered='yes' must be True or False"):
+        plan.candidate_pairs(turning, P / 6, ordered="yes")
 
 
 def test_map_chunks_across_processes_equal_the_loop(ellipse, tmp_path):

@@ -547,6 +547,13 @@ def test_squeeze_takes_a_scene_and_an_operator(square):
         jsq.squeeze(_scene(square), op="sparse")
     with pytest.raises(TypeError, match="Scene.grip must be integer node indices"):     # traced floats
         jax.jit(lambda g: jsq.squeeze(_scene(square, grip=g)))(jnp.array([3.0, 13.0]))
+    # a switch given as text was read by its truthiness: history="False" recorded every row
+    for kw in (dict(history="False"), dict(trim="no"), dict(throw=1)):
+        name, value = next(iter(kw.items()))
+        with pytest.raises(TypeError, match=f"{name}={value!r} must be True or False"):
+            jsq.squeeze(_scene(square), **kw)
+    with pytest.raises(TypeError, match="history='False' must be True or False"):
+        jsq.simulation.api.compile_ahead(_scene(square), history="False")
 
 
 def test_a_given_operator_takes_E_and_thickness_from_the_scene_and_must_match_it(square):
