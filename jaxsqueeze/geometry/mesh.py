@@ -47,9 +47,10 @@ class ByContent:
         return hash(self._digest)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Mesh(ByContent):
-    """A validated triangle mesh of a planar object.
+    """A validated triangle mesh of a planar object: ``jsq.Mesh(points, triangles)`` (the same
+    as :meth:`from_arrays`), :func:`read_mesh` or :mod:`jaxsqueeze.geometry.shapes`.
 
     Attributes:
         points: (n, 2) float64 node positions [m], translated so the node centroid is at the
@@ -78,6 +79,22 @@ class Mesh(ByContent):
     normals: np.ndarray
     offset: np.ndarray
     source: np.ndarray | None = None
+
+    def __init__(self, points, triangles, boundary=None, loops=None, normals=None, offset=None, source=None):
+        """``Mesh(points, triangles)``: validated, oriented and centered (:meth:`from_arrays`,
+        whose errors it raises). Every field given (the library's own construction, and
+        ``dataclasses.replace``) takes them as they are."""
+        rest = (boundary, loops, normals, offset)
+        if all(v is None for v in rest + (source,)):
+            built = type(self).from_arrays(points, triangles)
+            values = [getattr(built, f.name) for f in dataclasses.fields(built)]
+        elif any(v is None for v in rest):
+            raise TypeError("build a mesh as jsq.Mesh(points, triangles) (or Mesh.from_arrays, read_mesh, "
+                            "jsq.shapes): boundary, loops, normals and offset are derived from them")
+        else:
+            values = [points, triangles, boundary, loops, normals, offset, source]
+        for f, v in zip(dataclasses.fields(self), values):
+            object.__setattr__(self, f.name, v)
 
     def __repr__(self) -> str:
         w, h = np.ptp(np.asarray(self.points, float), axis=0) if self.n else (0.0, 0.0)

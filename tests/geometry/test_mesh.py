@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from jaxsqueeze.geometry import shapes
+from jaxsqueeze.geometry import mesh as mesh_mod
 from jaxsqueeze.geometry.mesh import Mesh, read_mesh, write_mesh
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -109,6 +110,20 @@ def test_boundary_index():
 def test_validation_errors(pts, tri, match):
     with pytest.raises(ValueError, match=match):
         Mesh.from_arrays(pts, tri)
+    with pytest.raises(ValueError, match=match):         # the front door a user tries first
+        Mesh(pts, tri)
+
+
+def test_mesh_of_points_and_triangles_is_from_arrays():
+    """``Mesh(points, triangles)`` validates, orients and centres as ``from_arrays`` does (it
+    raised Python's "missing 4 required positional arguments"); a partial field list is
+    refused, saying how to build one."""
+    m = Mesh(SQUARE + [3.0, 4.0], SQUARE_TRI[:, ::-1])          # clockwise: flipped
+    assert m == Mesh.from_arrays(SQUARE + [3.0, 4.0], SQUARE_TRI[:, ::-1])
+    np.testing.assert_allclose(m.offset, [3.5, 4.5])
+    assert all(signed_area > 0 for signed_area in mesh_mod.signed_areas(m.points, m.triangles))
+    with pytest.raises(TypeError, match=r"build a mesh as jsq.Mesh\(points, triangles\)"):
+        Mesh(m.points, m.triangles, m.boundary)
 
 
 def test_a_slit_of_zero_width_is_refused_saying_how_to_open_it():
