@@ -191,7 +191,7 @@ def main(argv=None) -> int:
 #: the files ``run``, ``plan`` and ``demo`` write into ``--out``: the only entries an existing
 #: output folder may hold, since a new run replaces that folder whole
 OUTPUT_FILES = frozenset({"summary.json", "squeeze.xdmf", "squeeze.h5", "final.vtu"} | {
-    f"{name}.png" for name in ("deformed", "force_profile", "sliding_profile", "events", "cones", "map", "best")})
+    f"{name}.png" for name in ("deformed", "stress", "force_profile", "sliding_profile", "events", "cones", "map", "best")})
 
 
 def _check_out(out: str) -> None:

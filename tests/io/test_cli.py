@@ -90,6 +90,7 @@ def _check_outputs(out):
 
 def test_demo_writes_everything(demo_dir):
     _check_outputs(demo_dir)
+    cli._check_out(str(demo_dir))       # a second run may replace it (stress.png was refused: make demo twice failed)
     s = json.loads((demo_dir / "summary.json").read_text())
     assert s["status"] == "SUCCESS"
     assert s["final_depth"] == pytest.approx(0.015)
@@ -101,6 +102,7 @@ def test_demo_writes_everything(demo_dir):
 def test_run_matches_python(run_dir):
     path, out = run_dir
     _check_outputs(out)
+    cli._check_out(str(out))
     s = json.loads((out / "summary.json").read_text())
     spec = scenefile.load(path)
     res = jsq.squeeze(spec.scene)

@@ -58,6 +58,7 @@ def test_plan_writes_map_search_and_best_grasp(tmp_path, capsys, monkeypatch):
     assert abs(sum(s["best"]["finger_work_J"]) - s["best"]["adversary_work_J"]) < 1e-9 * s["best"]["adversary_work_J"]
     assert s["map"]["squeezes"] > 0 and len(s["search"]["paths"]) >= 1
     assert (out / "map.png").stat().st_size > 0 and (out / "best.png").stat().st_size > 0
+    cli._check_out(str(out))            # a second plan may replace what this one wrote
     # 12 mm boundary edges under 10 mm fingertips: placements between nodes may leave the cones (mu = 0.5)
     assert any(w.startswith("boundary edges 0.0117 m long under fingertips of radius 0.01 m") for w in s["warnings"])
     assert "warning: boundary edges" not in capsys.readouterr().err            # -q
