@@ -178,7 +178,13 @@ def _placed(scene: Scene, x) -> Scene:
 
 def _quality(qfn, res):
     """qfn(res) as a () float array, or an error naming what it returned (at trace time)."""
-    q = qfn(res)
+    try:
+        q = qfn(res)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,     # np.asarray, float(),
+            jax.errors.TracerIntegerConversionError) as e:                                 # if, int()
+        raise TypeError("the quality function needs concrete numbers, but maps and searches call it on traced "
+                        "results (inside jit and vmap): compute it with jax.numpy (jnp.sum, jnp.where) instead of "
+                        "numpy, float(), int() or an if on a value; JAX said: " + str(e).split("\n")[0]) from e
     try:
         q = jnp.asarray(q)
     except (TypeError, ValueError):                  # a string, None, a dict ...

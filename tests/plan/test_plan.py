@@ -149,6 +149,11 @@ def test_a_quality_that_is_not_one_finite_number_is_named():
     with pytest.raises(TypeError, match="returned None; it must return a number"):
         search._quality(lambda r: None, res)
     assert search._quality(lambda r: 2.0, res).shape == ()
+    # numpy, float() or an if on a traced result raised JAX's tracer error from deep in a map
+    for fn in (lambda r: float(r), lambda r: np.asarray(r), lambda r: 1.0 if r > 0 else 0.0, lambda r: int(r)):
+        with pytest.raises(TypeError, match=r"maps and searches call it on traced results .* compute it with "
+                                            r"jax.numpy"):
+            jax.jit(lambda x: search._quality(fn, x))(1.0)
     ok, bad = int(jsq.Status.SUCCESS), int(jsq.Status.SLIP_FAILURE)
     summ = search.Summary(np.array([bad, ok, ok]), np.array([np.nan, 1.0, np.inf]), *np.zeros((3, 3)))
     with pytest.raises(ValueError, match=r"the quality is inf at 1 successful squeeze\(s\), e.g. the candidate "
