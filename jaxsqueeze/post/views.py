@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..geometry.boundary import positions
+from ..numbers import positive
 from ..simulation.laws import EVENT_KINDS, EVENT_MEANING, FREE, MODE_NAMES, SLIP_NEG, SLIP_POS, STICK  # noqa: F401
 
 EVENT_LETTERS = EVENT_KINDS   # A new contact, B break, C stick→slip, D slip→stick
@@ -414,7 +415,13 @@ def event_table(res, grip_distance_m: float | None = None) -> list[dict]:
     else read from the result: :func:`grip_distance`), node (mesh id), kind ('A'..'D'),
     meaning, finger (0 still, 1 squeezing, 2 the adversary's pusher)."""
     res = trimmed(res)
-    D0 = grip_distance(res) if grip_distance_m is None else float(grip_distance_m)
+    D0 = grip_distance(res) if grip_distance_m is None else positive(grip_distance_m, "grip_distance_m", "m")
+    return _events(res, D0)
+
+
+def _events(res, D0: float) -> list[dict]:
+    """:func:`event_table` of a trimmed result with the grip distance ``D0`` (NaN where no touch
+    gives one: relative depths NaN)."""
     first = int(res.squeeze_events)
     out = []
     for e, (d, n, k, f) in enumerate(zip(*(np.asarray(a) for a in res.events))):
@@ -564,7 +571,7 @@ def summary(res, scene=None, timings: dict | None = None) -> dict:
     if scene is not None and not np.isfinite(D0):       # no touch to read it from: the object's nodes
         P = np.asarray(scene.mesh.points, float)
         D0 = float(np.linalg.norm(np.subtract(*P[np.asarray(res.grip)])))
-    events = event_table(res, D0)
+    events = _events(res, D0)
     out = dict(
         status=st.name, success=bool(st == Status.SUCCESS), advice=st.advice,
         final_depth=float(res.final_depth), grip_distance=D0,

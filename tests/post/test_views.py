@@ -123,6 +123,11 @@ def test_exports_and_summary_refuse_or_survive_what_a_hostile_caller_passes(tmp_
     assert export.write_final_vtu(tmp_path / "f.vtu", res, mesh).endswith("f.vtu")
     assert export.write_final_vtu(tmp_path / "s.vtu", res, scene).endswith("s.vtu")      # the scene's mesh
     assert export.write_paraview(tmp_path / "pv", res, scene).endswith("squeeze.xdmf")
+    for bad in (-1.0, 0.0, float("nan"), "0.1"):          # (a negative one gave negative relative depths)
+        with pytest.raises(ValueError, match="grip_distance_m must be"):
+            views.event_table(res, grip_distance_m=bad)
+    assert views.event_table(res, grip_distance_m=0.2) == [dict(e, relative_depth=e["depth"] / 0.2)
+                                                           for e in views.event_table(res)]
     blind = dataclasses.replace(res, theta=np.full_like(res.theta, np.nan))
     s = views.summary(blind)
     assert s["grip_distance"] is None and s["relative_depth"] is None
