@@ -72,6 +72,7 @@ L = the larger bounding-box side of the nodes. A thin band is compliant, so G is
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -199,9 +200,10 @@ def _length(name: str, v) -> float:
     return positive(v, f"band {name}", "m")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Band(ByContent):
-    """Discretized band on a closed counterclockwise curve (build with the class methods).
+    """Discretized band on a closed counterclockwise curve: ``Band(xy, width=..., height=...)``
+    (the same as :meth:`from_curve`) or :meth:`from_function`.
 
     Frame (the same convention as :class:`~jaxsqueeze.mesh.Mesh`): ``points`` are translated
     so that the node centroid is at the origin, and ``offset`` (2,) is that centroid in the
@@ -241,6 +243,24 @@ class Band(ByContent):
     qd1: np.ndarray
     qd2: np.ndarray
     offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def __init__(self, points, tangents=None, normals=None, curvature=None, s=None, perimeter=None,
+                 width=0.5e-3, height=5e-3, du=None, jac=None, qd1=None, qd2=None, offset=None):
+        """``Band(xy, width=..., height=...)``: the band through the closed counterclockwise
+        polyline ``xy`` (:meth:`from_curve`, whose errors it raises). Every field given (the
+        library's own construction, and ``dataclasses.replace``) takes them as they are."""
+        derived = (tangents, normals, curvature, s, perimeter, du, jac, qd1, qd2)
+        if all(v is None for v in derived + (offset,)):
+            built = type(self).from_curve(points, width, height)
+            values = [getattr(built, f.name) for f in dataclasses.fields(built)]
+        elif any(v is None for v in derived):
+            raise TypeError("build a band as Band(xy, width=..., height=...) or Band.from_function(gamma, m): "
+                            "its tangents, normals, curvature, arc lengths and spline data are derived from them")
+        else:
+            values = [points, tangents, normals, curvature, s, perimeter, width, height, du, jac, qd1, qd2,
+                      np.zeros(2) if offset is None else offset]
+        for f, v in zip(dataclasses.fields(self), values):
+            object.__setattr__(self, f.name, v)
 
     def __repr__(self) -> str:
         w, h = np.ptp(np.asarray(self.points, float), axis=0)

@@ -248,6 +248,20 @@ def test_a_repeated_closing_point_is_dropped_and_coincident_points_are_named():
         Band.from_curve(twin)
 
 
+def test_band_of_a_polyline_is_from_curve():
+    """``Band(xy, width=..., height=...)`` builds the band as ``from_curve`` does (it raised
+    Python's "missing 11 required positional arguments"), with its errors; a partial field
+    list is refused, saying how to build one."""
+    xy = curves.circle(0.04)(np.linspace(0.0, 1.0, 32, endpoint=False)) + [1.0, 2.0]
+    band = Band(xy, width=1e-3, height=4e-3)
+    assert band == Band.from_curve(xy, 1e-3, 4e-3) and band.height == 4e-3
+    np.testing.assert_allclose(band.offset, [1.0, 2.0], atol=1e-15)
+    with pytest.raises(ValueError, match="must run counterclockwise"):
+        Band(xy[::-1])
+    with pytest.raises(TypeError, match=r"build a band as Band\(xy, width=..., height=...\)"):
+        Band(band.points, tangents=band.tangents)
+
+
 @pytest.mark.parametrize("args,kw,match", [
     ((4,), {}, "m >= 8, got 4: a ring of 4 nodes is about 800 times too stiff"),
     ((10.5,), {}, "integer number of nodes m >= 8, got 10.5"),
