@@ -260,6 +260,8 @@ def test_band_of_a_polyline_is_from_curve():
         Band(xy[::-1])
     with pytest.raises(TypeError, match=r"build a band as Band\(xy, width=..., height=...\)"):
         Band(band.points, tangents=band.tangents)
+    import jaxsqueeze as jsq                       # the README's names
+    assert jsq.band.Band is Band and jsq.band.Band.from_function(jsq.curves.heart(0.08), 64).m == 64
 
 
 @pytest.mark.parametrize("args,kw,match", [
