@@ -46,6 +46,12 @@ class ByContent:
     def __hash__(self) -> int:
         return hash(self._digest)
 
+    def _fill(self, values) -> None:
+        """Set the fields of a frozen dataclass, in their order, from ``values`` (an
+        ``__init__`` of its own)."""
+        for f, v in zip(dataclasses.fields(self), values, strict=True):
+            object.__setattr__(self, f.name, v)
+
 
 @dataclass(frozen=True, eq=False, init=False)
 class Mesh(ByContent):
@@ -93,8 +99,7 @@ class Mesh(ByContent):
                             "jsq.shapes): boundary, loops, normals and offset are derived from them")
         else:
             values = [points, triangles, boundary, loops, normals, offset, source]
-        for f, v in zip(dataclasses.fields(self), values):
-            object.__setattr__(self, f.name, v)
+        self._fill(values)
 
     def __repr__(self) -> str:
         w, h = np.ptp(np.asarray(self.points, float), axis=0) if self.n else (0.0, 0.0)

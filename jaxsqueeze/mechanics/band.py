@@ -75,7 +75,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -242,7 +242,7 @@ class Band(ByContent):
     jac: np.ndarray
     qd1: np.ndarray
     qd2: np.ndarray
-    offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    offset: np.ndarray
 
     def __init__(self, points, tangents=None, normals=None, curvature=None, s=None, perimeter=None,
                  width=0.5e-3, height=5e-3, du=None, jac=None, qd1=None, qd2=None, offset=None):
@@ -259,8 +259,7 @@ class Band(ByContent):
         else:
             values = [points, tangents, normals, curvature, s, perimeter, width, height, du, jac, qd1, qd2,
                       np.zeros(2) if offset is None else offset]
-        for f, v in zip(dataclasses.fields(self), values):
-            object.__setattr__(self, f.name, v)
+        self._fill(values)
 
     def __repr__(self) -> str:
         w, h = np.ptp(np.asarray(self.points, float), axis=0)
