@@ -41,6 +41,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable
 
+from .numbers import flag
+
 #: environment of a worker process: XLA and BLAS on one thread each
 WORKER_ENV = {
     "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
@@ -155,6 +157,7 @@ def map_scenes(fn: Callable[[Any], Any], items: Iterable, processes: int | None 
     for name, v in (("processes", processes), ("chunk", chunk)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1):
             raise ValueError(f"{name} must be an integer >= 1 (or None), got {v!r}")
+    progress = flag(progress, "progress")
     processes = cpu_count() if processes is None else int(processes)
     if processes > 1 and n > 1:          # a worker receives fn by name: say so before any worker starts
         try:

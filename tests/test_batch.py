@@ -91,6 +91,12 @@ def test_counts_that_are_not_positive_integers_are_refused(kw):
         map_scenes(_square_and_env, range(4), progress=False, **kw)
 
 
+def test_a_progress_switch_given_as_text_is_refused():
+    """progress="False" is true to Python and drew the bar."""
+    with pytest.raises(TypeError, match="progress='False' must be True or False"):
+        map_scenes(_square_and_env, range(4), progress="False", processes=1)
+
+
 def test_a_function_workers_cannot_receive_is_named_before_any_worker_starts():
     """A lambda failed with pickle's bare "Can't pickle local object" from the pool."""
     with pytest.raises(TypeError, match=r"sends fn to worker processes by name, .* top level of a module"):

@@ -334,6 +334,7 @@ def evaluate(scene: Scene, X, quality="squeeze_work", op=None, batch: str = "aut
     chunk (each 16 squeezes of a loop) where stderr is a terminal or a Jupyter notebook's
     (:func:`jaxsqueeze.batch.interactive`).
     """
+    progress = flag(progress, "progress")
     return _evaluate_with_runs(scene, X, quality, op, batch, chunk, progress, processes, cache)[0]
 
 
@@ -660,7 +661,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     import optax
 
     check_search(optimizer, steps, starts, budget, init)
-    vary_angle = flag(vary_angle, "vary_angle")
+    vary_angle, progress = flag(vary_angle, "vary_angle"), flag(progress, "progress")
     init = None if init is None else candidates(init, "init")
     op = _check(scene, np.zeros((1, 3)) if init is None else init, op, everywhere=True)
     qfn = quality_of(scene, quality)

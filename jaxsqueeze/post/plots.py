@@ -16,7 +16,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 from matplotlib.tri import Triangulation
 
-from ..numbers import real_array
+from ..numbers import flag, real_array
 from . import cones, views
 from .views import EVENT_LETTERS, FREE, SLIP_POS, STICK
 
@@ -300,6 +300,7 @@ def plot_force_profile(res, rows=None, mesh=None, degrees=True, smooth=True) -> 
     are nodal values (filled: stick, open: slip); lines are cubic splines through them.
     """
     res = views.trimmed(res)
+    degrees, smooth = flag(degrees, "degrees"), flag(smooth, "smooth")
     mesh = None if mesh is None else views.check_object(res, mesh)
     if isinstance(rows, (int, np.integer)) and not isinstance(rows, (bool, np.bool_)):
         rows = [rows]                                      # one row
@@ -356,6 +357,7 @@ def plot_sliding_profile(res, degrees=True) -> Figure:
     adversary's push rows all lie at the final depth (the title counts them).
     """
     res = views.trimmed(res)
+    degrees = flag(degrees, "degrees")
     fig = Figure(figsize=(10, 5.5), dpi=DPI, layout="constrained")
     axs = fig.subplots(1, 2)
     ev = views.event_table(res)

@@ -67,6 +67,10 @@ def test_bad_map_spacing_and_placement_shapes_are_refused_before_compiling(ellip
         jsq.optimize_placement(ellipse, "squeeze_work", optimizer="adam", progress=False)
     with pytest.raises(TypeError, match="vary_angle='False' must be True or False"):     # (a true string)
         jsq.optimize_placement(ellipse, "squeeze_work", vary_angle="False", progress=False)
+    for call in (lambda: jsq.optimize_placement(ellipse, "squeeze_work", progress="no"),
+                 lambda: jsq.grasp_map(ellipse, "squeeze_work", spacing=0.02, progress="no")):
+        with pytest.raises(TypeError, match="progress='no' must be True or False"):
+            call()
     import optax        # a line search needs the value inside optax: it failed there, deep in optax's update
     with pytest.raises(ValueError, match=r"cannot take a step from a gradient alone .*optax.lbfgs, ...\) evaluate"):
         jsq.optimize_placement(ellipse, "squeeze_work", optimizer=optax.lbfgs(), progress=False)

@@ -362,7 +362,11 @@ def test_post_functions_name_a_wrong_kind_of_argument(offset, tmp_path):
             (lambda: views.row_displacement(res, scene), r"compliance operator \(scene.operator\(\)\)\), got Scene"),
             (lambda: export.write_paraview(tmp_path, res, scene, op=scene), "got Scene"),
             (lambda: plots.plot_deformed(res, op), "got Compliance"),
-            (lambda: cones.cone_axes(res, None), "got NoneType")]:
+            (lambda: cones.cone_axes(res, None), "got NoneType"),
+            # a switch given as text ("False" is true to Python) is refused, not read by truthiness
+            (lambda: plots.plot_force_profile(res, rows=-1, degrees="False"), "degrees='False' must be True or False"),
+            (lambda: plots.plot_force_profile(res, rows=-1, smooth="no"), "smooth='no' must be True or False"),
+            (lambda: plots.plot_sliding_profile(res, degrees="rad"), "degrees='rad' must be True or False")]:
         with pytest.raises(TypeError, match=match):
             call()
     path = export.write_paraview(tmp_path, res, scene, name="run.xdmf")
