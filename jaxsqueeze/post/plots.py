@@ -101,8 +101,10 @@ def plot_deformed(res, mesh, row: int = -1, displacement=None, zoom=None, ax=Non
         if displacement.shape != np.shape(mesh.points) or not np.all(np.isfinite(displacement)):
             raise ValueError(f"displacement must be finite (n, 2) = {np.shape(mesh.points)} nodal displacements [m] of "
                              f"the mesh, got shape {displacement.shape}; see jaxsqueeze.views.row_displacement")
-    if forces is None:
-        forces = _is_band(mesh)
+    forces = _is_band(mesh) if forces is None else flag(forces, "forces")
+    show_nodes, details = flag(show_nodes, "show_nodes"), flag(details, "details")
+    if legend != "figure":                  # (the close-ups' figure-wide legend)
+        legend = flag(legend, "legend")
     r = views.row_index(res, row)
     if stress is not None:
         if stress not in STRESS_NAMES:

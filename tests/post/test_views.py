@@ -366,7 +366,9 @@ def test_post_functions_name_a_wrong_kind_of_argument(offset, tmp_path):
             # a switch given as text ("False" is true to Python) is refused, not read by truthiness
             (lambda: plots.plot_force_profile(res, rows=-1, degrees="False"), "degrees='False' must be True or False"),
             (lambda: plots.plot_force_profile(res, rows=-1, smooth="no"), "smooth='no' must be True or False"),
-            (lambda: plots.plot_sliding_profile(res, degrees="rad"), "degrees='rad' must be True or False")]:
+            (lambda: plots.plot_sliding_profile(res, degrees="rad"), "degrees='rad' must be True or False"),
+            (lambda: plots.plot_deformed(res, scene, show_nodes="off"), "show_nodes='off' must be True or False"),
+            (lambda: plots.plot_deformed(res, scene, forces=1), "forces=1 must be True or False")]:
         with pytest.raises(TypeError, match=match):
             call()
     path = export.write_paraview(tmp_path, res, scene, name="run.xdmf")
