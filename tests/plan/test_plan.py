@@ -339,6 +339,20 @@ def test_jacfwd_in_placement_matches_central_differences(ellipse):
         assert np.all(np.abs(fd[on]) > 1e-6)
         np.testing.assert_allclose(J[on, k], fd[on], rtol=1e-6)
     assert float(J[0, 3]) == 0.0
+    # at a kink, both fingers on nodes (s_0 = 0 is node 0, P/2 a node of this symmetric mesh):
+    # the grip force's one-sided differences disagree in sign, and jacfwd is one of them
+    # (docs/planning.md, "piecewise smooth"); the same compiled program
+    x1 = np.array([0.0, P / 2, 0.0, P / 4])
+    with compiles() as compiled:
+        J1, status = jax.jacfwd(f, has_aux=True)(jnp.asarray(x1))
+    assert compiled == []
+    assert int(status) == jsq.Status.SUCCESS
+    f1 = float(f(x1)[0][0])
+    for k in (0, 1):
+        h = np.eye(4)[k] * 1e-7
+        sides = np.array([float(f(x1 + h)[0][0]) - f1, f1 - float(f(x1 - h)[0][0])]) / 1e-7
+        assert sides[0] * sides[1] < 0
+        assert np.min(np.abs(sides - float(J1[0, k]))) <= 1e-4 * abs(float(J1[0, k]))
 
 
 def test_derivatives_stay_finite_where_the_grip_never_started(ellipse):
