@@ -40,8 +40,14 @@ def holds_bool(x) -> bool:
 def flag(x, what: str) -> bool:
     """``x`` as a bool when it is ``True`` or ``False`` (Python or NumPy); else ``TypeError``
     naming ``what``. A string such as "False" is true to Python and would silently switch the
-    option on, and 0/1 are refused rather than guessed."""
+    option on, and 0/1 are refused rather than guessed. A traced value (the switch passed as an
+    argument of ``jax.jit``) is refused with the way to keep it static."""
     if not isinstance(x, (bool, np.bool_)):
+        import jax
+        if isinstance(x, jax.core.Tracer):
+            raise TypeError(f"{what} is a switch that selects the program, but it arrived traced (an argument of "
+                            f"jax.jit or vmap): pass it as a Python bool, static, e.g. "
+                            f"jax.jit(jsq.squeeze, static_argnames=\"{what}\")")
         raise TypeError(f"{what}={x!r:.60} must be True or False")
     return bool(x)
 

@@ -554,6 +554,8 @@ def test_squeeze_takes_a_scene_and_an_operator(square):
             jsq.squeeze(_scene(square), **kw)
     with pytest.raises(TypeError, match="history='False' must be True or False"):
         jsq.simulation.api.compile_ahead(_scene(square), history="False")
+    with pytest.raises(TypeError, match=r"arrived traced .* static_argnames=\"history\""):    # (a bool argument of jit)
+        jax.jit(jsq.squeeze)(_scene(square), history=False)
 
 
 def test_a_given_operator_takes_E_and_thickness_from_the_scene_and_must_match_it(square):
