@@ -43,8 +43,8 @@ def flag(x, what: str) -> bool:
     option on, and 0/1 are refused rather than guessed. A traced value (the switch passed as an
     argument of ``jax.jit``) is refused with the way to keep it static."""
     if not isinstance(x, (bool, np.bool_)):
-        import jax
-        if isinstance(x, jax.core.Tracer):
+        from .tracing import is_concrete
+        if not is_concrete(x):
             raise TypeError(f"{what} is a switch that selects the program, but it arrived traced (an argument of "
                             f"jax.jit or vmap): pass it as a Python bool, static, e.g. "
                             f"jax.jit(jsq.squeeze, static_argnames=\"{what}\")")
