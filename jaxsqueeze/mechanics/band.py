@@ -192,7 +192,7 @@ def _check_wall(width: float, xy: np.ndarray, kappa: np.ndarray) -> None:
     if width * abs(kappa[k]) > 1.0:
         warnings.warn(f"band width = {width:g} m is thicker than the band's tightest radius of curvature "
                       f"({1 / abs(kappa[k]):.3g} m, at node {k}): the thin-wall beam model does not hold "
-                      "there", stacklevel=4)
+                      "there", stacklevel=caller_level())
 
 
 def _length(name: str, v) -> float:

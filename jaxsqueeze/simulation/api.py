@@ -19,7 +19,7 @@ from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..tracing import as_array, differentiated, forward_levels, is_concrete, own_transfers, reverse_mode
+from ..tracing import as_array, caller_level, differentiated, forward_levels, is_concrete, own_transfers, reverse_mode
 from ..mechanics.operator import Compliance, field_displacement, field_on_host
 from ..geometry.mesh import Mesh
 from ..numbers import flag
@@ -425,11 +425,11 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         if validate.deep_warning(float(op.length), depth) is None and int(res.status) != Status.INFEASIBLE_GRIP:
             deep = validate.deep_warning(None, depth, between)
             if deep:
-                warnings.warn(deep, stacklevel=2)
+                warnings.warn(deep, stacklevel=caller_level())
         inside = validate.inside_tip_warning(res, np.asarray(scene.mesh.points)[np.asarray(res.nodes)],
                                              SUNK_TOLS[op.G.dtype == np.float32] * float(grasp.gap_tol), scene.contact)
         if inside:
-            warnings.warn(inside, stacklevel=2)
+            warnings.warn(inside, stacklevel=caller_level())
     if op.field is not None:
         if is_concrete((F_hat, g_hat)) and np.ndim(F_hat) == 1:    # one eager squeeze: solved and kept on the host
             u = field_on_host(op, F_hat, g_hat) * np.asarray(op.length, np.dtype(F_hat.dtype))
@@ -440,7 +440,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         if concrete and np.ndim(res.count) == 0 and isinstance(scene.mesh, Mesh):
             flipped = validate.inverted_warning(scene.mesh.points, scene.mesh.triangles, u, float(res.final_depth))
             if flipped:
-                warnings.warn(flipped, stacklevel=2)
+                warnings.warn(flipped, stacklevel=caller_level())
     if trim and np.ndim(res.count) == 0 and is_concrete(res):   # eager, unbatched
         res = trim_result(res)
     if throw:
@@ -489,7 +489,7 @@ def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
                                          depth=float(scene.depth), E=float(scene.material.E),
                                          thickness=float(scene.material.thickness))
         for line in said:                  # mixed units, a squeeze deeper than half the object
-            warnings.warn(line, stacklevel=3)
+            warnings.warn(line, stacklevel=caller_level())
         if scene.placement is None:
             check_grip(scene, op)
     grasp = grasp_of(scene, op, validated=True) if concrete else _traced_grasp(scene, op)

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..mechanics.fem import METHODS
 from ..mechanics.material import Material, checked
-from ..tracing import as_array, is_concrete, numeric, own_transfers
+from ..tracing import as_array, caller_level, is_concrete, numeric, own_transfers
 from .laws import CONTACT_MODELS, FRICTION_MODELS
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
@@ -536,9 +536,9 @@ def nearest_boundary_node(obj, xy) -> int:
         warnings.warn(f"{xy.tolist()} is {s.distance:.3g} m from the nearest boundary node {s.node} at "
                       f"{s.at}, more than twice the boundary edges there ({s.edge:.3g} m); it is "
                       "taken, but a grip point belongs on the object's outline (lengths in metres, in the mesh's "
-                      "frame)", stacklevel=2)
+                      "frame)", stacklevel=caller_level())
     elif s.tie is not None:
         warnings.warn(f"boundary nodes {s.node} and {s.tie} are equally near {xy.tolist()} ({s.distance:.3g} m), "
                       f"node {s.node} is taken; for a node at that point mesh with refine_near=[point] (shapes) "
-                      "or pick the node yourself", stacklevel=2)
+                      "or pick the node yourself", stacklevel=caller_level())
     return s.node

@@ -304,8 +304,9 @@ def test_a_wall_thicker_than_the_tightest_curvature_radius_warns():
     """The thin-wall beam model needs the wall thin against the radius of curvature: the paper's
     literal 5 mm wall on the 8 cm heart is thicker than the 2.2 mm radius at its cusps."""
     import warnings
-    with pytest.warns(UserWarning, match=r"band width = 0.005 m is thicker than .* radius of curvature \(0.00218 m"):
+    with pytest.warns(UserWarning, match=r"band width = 0.005 m is thicker than .* radius of curvature \(0.00218 m") as said:
         Band.from_function(curves.heart(0.08), 128, width=5e-3)
+    assert said[0].filename == __file__
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         Band.from_function(curves.heart(0.08), 128)          # the default 0.5 mm wall: w / r = 0.23

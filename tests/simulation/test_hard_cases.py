@@ -444,6 +444,7 @@ def test_a_corner_pinched_between_both_tips_warns():
     first = int(np.argmax(on_0 & (inside > 10 * 1e-9 * 0.08)))
     assert inside[-1] == pytest.approx(1.52e-3, rel=0.01) and on_0[-1]
     [message] = [str(w.message) for w in said if "fingertip 1" in str(w.message)]
+    assert {w.filename for w in said} == {__file__}
     assert f"from depth = {res.depth[first]:g} m" in message and "corner" in message
     assert 1.0776e-3 < res.depth[first] < 1.2e-3
     with warnings.catch_warnings():

@@ -236,8 +236,9 @@ def test_nearest_boundary_node_warns_when_two_nodes_are_equally_near(square):
     decides whether a 'centred' grip is slanted (11 degrees here, a fifth of the grip force
     sideways), so it says so; a point on a node says nothing."""
     import warnings
-    with pytest.warns(UserWarning, match=r"boundary nodes \d+ and \d+ are equally near \[0.0, -0.05\]"):
+    with pytest.warns(UserWarning, match=r"boundary nodes \d+ and \d+ are equally near \[0.0, -0.05\]") as said:
         node = jsq.scene.nearest_boundary_node(square, (0.0, -0.05))
+    assert said[0].filename == __file__                    # the warning names the caller's line
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert jsq.scene.nearest_boundary_node(square, (square.points + square.offset)[node]) == node
@@ -492,6 +493,7 @@ def test_a_squeeze_across_a_narrow_part_warns_and_counts_the_triangles_it_turns_
     flipped = int(np.sum(area(x1) / area(x0) <= 0))
     assert flipped >= 1
     assert any(t.startswith(f"at depth = 0.018 m {flipped} of {len(tri)} triangles are turned inside out") for t in texts)
+    assert {w.filename for w in said} == {__file__}        # each names the user's line, not the library's
     with warnings.catch_warnings():
         warnings.simplefilter("error")           # a squeeze of 15 % says neither
         jsq.squeeze(sc.replace(depth=0.003))
@@ -531,8 +533,9 @@ def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
     from jaxsqueeze.io import scenefile
     with pytest.warns(UserWarning, match="more than 50% of the object"):
         jsq.squeeze(_scene(square, depth=0.06))
-    with pytest.warns(UserWarning, match=r"thickness = 25.4 m is 254 times the object's size"):
+    with pytest.warns(UserWarning, match=r"thickness = 25.4 m is 254 times the object's size") as said:
         jsq.squeeze(_scene(square, material=jsq.Material(E=1e5, nu=0.3, thickness=25.4)))   # mm for m
+    assert said[0].filename == __file__
     text = (b"[object]\nshape = \"rectangle\"\nwidth = 0.1\nheight = 0.1\nmax_edge = 0.02\n[material]\nE = 1e5\n"
             b"nu = 0.3\nthickness = 0.01\n[fingers]\nradius = 0.01\n[grip]\npoints = [[0.0, -0.05], [0.0, 0.05]]\n"
             b"[squeeze]\nrelative_depth = 0.9\n")
