@@ -430,6 +430,12 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
                                              SUNK_TOLS[op.G.dtype == np.float32] * float(grasp.gap_tol), scene.contact)
         if inside:
             warnings.warn(inside, stacklevel=caller_level())
+        if isinstance(scene.mesh, Mesh) and scene.contact == "segment":
+            coarse = validate.resolution_warning(res, np.asarray(scene.mesh.points)[np.asarray(res.nodes)],
+                                                 scene.mesh.loops, float(scene.material.E),
+                                                 float(scene.material.thickness))
+            if coarse:
+                warnings.warn(coarse, stacklevel=caller_level())
     if op.field is not None:
         if is_concrete((F_hat, g_hat)) and np.ndim(F_hat) == 1:    # one eager squeeze: solved and kept on the host
             u = field_on_host(op, F_hat, g_hat) * np.asarray(op.length, np.dtype(F_hat.dtype))

@@ -761,6 +761,52 @@ def inside_tip_warning(res, points, tol: float, contact: str = "segment") -> str
             "(result.depth gives the rows before)")
 
 
+def resolution_warning(res, points, loops, E: float, thickness: float) -> str | None:
+    """The warning for a fingertip whose segment contact stayed one node wide through the
+    squeeze ``res``, or None. ``points`` (m, 2) are the boundary nodes [m] in ``res.nodes``
+    order, ``loops`` the boundary loop sizes (``Mesh.loops``); for a solid mesh.
+
+    One node cannot resolve a contact: the squeeze is then a point load's, whose force does
+    not depend on the radius and changes with the mesh (on the foam square by 32 % for a 2 mm
+    tip on 10 mm edges, docs/numerics.md §2, 29). The advice uses the 2D Hertz width of a rigid
+    cylinder on a plane-stress half-plane, 2a with a² = 4 F r / (π E t), F the largest force
+    [N] the finger exerted; it matched the contact width of converged meshes within 10 %. A
+    grip at a corner (the boundary turning by more than 30° at it) is not judged: there the
+    contact is a point."""
+    k = int(res.count)
+    modes, fg = np.asarray(res.modes)[:k], np.asarray(res.finger)[:k]
+    forces, nodes, x = np.asarray(res.forces, float)[:k], np.asarray(res.nodes), np.asarray(points, float)
+    ends = np.cumsum(loops)
+    said = []
+    for f in (0, 1):
+        own = (modes > 0) & (fg == f)                                       # (k, m)
+        if own.sum(axis=1).max(initial=0) != 1:
+            continue
+        at = np.flatnonzero(nodes == int(np.asarray(res.grip)[f]))
+        if at.size == 0:
+            continue
+        p = int(at[0])
+        loop = int(np.searchsorted(ends, p, side="right"))
+        start, size = int(ends[loop]) - int(loops[loop]), int(loops[loop])
+        e1 = x[p] - x[start + (p - start - 1) % size]
+        e2 = x[start + (p - start + 1) % size] - x[p]
+        h1, h2 = float(np.hypot(*e1)), float(np.hypot(*e2))
+        if np.dot(e1, e2) < math.cos(math.radians(30.0)) * h1 * h2:      # a corner
+            continue
+        F = float(np.max(np.hypot(*np.where(own[..., None], forces, 0.0).sum(axis=1).T)))
+        said.append((f, int(nodes[p]), 0.5 * (h1 + h2), F, 4.0 * math.sqrt(F * float(res.radius) / (math.pi * E * thickness))))
+    if not said:
+        return None
+    where = " and ".join(f"finger {f} (node {n}, edges {h:.2g} m, at most {F:.3g} N: about {w:.2g} m wide)"
+                         for f, n, h, F, w in said)
+    return (f"the contact stayed one node wide on {where}: the boundary edges there are too long to resolve the "
+            f"contact (its width: the 2D Hertz estimate for radius {float(res.radius):g} m), so these are a point "
+            "load's forces on this mesh, independent of the radius and off by up to tens of percent "
+            "(docs/numerics.md §2, 29); mesh the boundary near the grip with edges of at most "
+            f"{min(w for *_, w in said) / 4:.2g} m (shapes: refine_near=[grip points], refine_edge=...), or use "
+            "contact='point' to ask for a point load")
+
+
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
                   thickness=None, between=None) -> tuple[list[str], list[str]]:
     """Sanity checks for mixed units: (errors, warnings), one line each with a suggestion.

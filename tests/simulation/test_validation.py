@@ -494,9 +494,10 @@ def test_a_squeeze_across_a_narrow_part_warns_and_counts_the_triangles_it_turns_
     assert flipped >= 1
     assert any(t.startswith(f"at depth = 0.018 m {flipped} of {len(tri)} triangles are turned inside out") for t in texts)
     assert {w.filename for w in said} == {__file__}        # each names the user's line, not the library's
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")           # a squeeze of 15 % says neither
+    with warnings.catch_warnings(record=True) as quiet:
+        warnings.simplefilter("always")          # a squeeze of 15 % says neither (only that 5 mm edges are coarse)
         jsq.squeeze(sc.replace(depth=0.003))
+    assert all("the contact stayed one node wide" in str(w.message) for w in quiet), [str(w.message) for w in quiet]
     text = ("[object]\nshape = \"rectangle\"\nwidth = 0.1\nheight = 0.02\nmax_edge = 0.005\n[material]\nE = 1e5\n"
             "nu = 0.3\nthickness = 0.0254\n[fingers]\nradius = 0.005\n[grip]\npoints = [[0.0, -0.01], [0.0, 0.01]]\n"
             "[squeeze]\nrelative_depth = 0.6\n")
@@ -541,6 +542,33 @@ def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
             b"[squeeze]\nrelative_depth = 0.9\n")
     (tmp_path / "s.toml").write_bytes(text)
     assert any("more than 50% of the object" in w for w in scenefile.load(tmp_path / "s.toml").warnings)
+
+
+def test_a_contact_that_stays_one_node_wide_warns(square):
+    """Fingertips smaller than the boundary edges at the grip touched one node through the
+    whole squeeze and said nothing: the forces were a point load's, the same for every radius,
+    and 32 % off a converged mesh for a 2 mm tip on 10 mm edges (docs/numerics.md §2, 29). The
+    eager squeeze now warns with the contact's Hertz width and the edges that resolve it; a
+    corner grip and a contact that grew past one node say nothing."""
+    small = _scene(square, fingers=jsq.Fingers(radius=0.002))
+    with pytest.warns(UserWarning, match=r"the contact stayed one node wide on finger 0 \(node \d+, edges 0.02 m, at most "
+                      r"8.29 N: about 0.0058 m wide\) and finger 1 .*edges of at most 0.0014 m") as said:
+        res = jsq.squeeze(small)
+    assert said[0].filename == __file__
+    on = np.asarray(res.modes) > 0
+    assert on.sum(axis=1).max() == 2 and res.outcome == jsq.Status.SUCCESS       # one node per tip
+    F = float(res.grip_force)
+    assert 2 * math.sqrt(4 * F * 0.002 / (math.pi * 1e5 * 0.0254)) == pytest.approx(0.0058, abs=5e-5)   # 2D Hertz 2a
+    with pytest.warns(UserWarning, match=r"one node wide .* about 0.022 m wide"):
+        wider = jsq.squeeze(small.replace(fingers=jsq.Fingers(radius=0.03)))
+    assert float(wider.grip_force) == pytest.approx(F, rel=1e-12)               # a point load: no radius in it
+    b, P = np.asarray(square.boundary), square.points + square.offset
+    corners = tuple(int(b[np.argmin(np.linalg.norm(P[b] - q, axis=1))]) for q in ([-0.05, -0.05], [0.05, 0.05]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        big = jsq.squeeze(small.replace(fingers=jsq.Fingers(radius=0.1)))          # several nodes per tip
+        assert (np.asarray(big.modes)[-1] > 0).sum() > 2
+        jsq.squeeze(small.replace(grip=corners))                                   # a corner is a point
 
 
 def test_squeeze_takes_a_scene_and_an_operator(square):
