@@ -803,8 +803,8 @@ def resolution_warning(res, points, loops, E: float, thickness: float) -> str | 
             f"contact (its width: the 2D Hertz estimate for radius {float(res.radius):g} m), so these are a point "
             "load's forces on this mesh, independent of the radius and off by up to tens of percent "
             "(docs/numerics.md §2, 29); mesh the boundary near the grip with edges of at most "
-            f"{min(w for *_, w in said) / 4:.2g} m (shapes: refine_near=[grip points], refine_edge=...), or use "
-            "contact='point' to ask for a point load")
+            f"{min(w for *_, w in said) / 4:.2g} m (jsq.shapes: refine_near=[grip points], refine_edge=...; a scene "
+            "file: object.refine_edge), or use contact='point' to ask for a point load")
 
 
 def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
