@@ -767,7 +767,7 @@ def resolution_warning(res, points, loops, E: float, thickness: float) -> str | 
     order, ``loops`` the boundary loop sizes (``Mesh.loops``); for a solid mesh.
 
     One node cannot resolve a contact: the squeeze is then a point load's, whose force does
-    not depend on the radius and changes with the mesh (on the foam square by 32 % for a 2 mm
+    not depend on the radius while the node sticks and changes with the mesh (on the foam square by 32 % for a 2 mm
     tip on 10 mm edges, docs/numerics.md §2, 29). The advice uses the 2D Hertz width of a rigid
     cylinder on a plane-stress half-plane, 2a with a² = 4 F r / (π E t), F the largest force
     [N] the finger exerted; it matched the contact width of converged meshes within 10 %. A
@@ -801,7 +801,7 @@ def resolution_warning(res, points, loops, E: float, thickness: float) -> str | 
                          for f, n, h, F, w in said)
     return (f"the contact stayed one node wide on {where}: the boundary edges there are too long to resolve the "
             f"contact (its width: the 2D Hertz estimate for radius {float(res.radius):g} m), so these are a point "
-            "load's forces on this mesh, independent of the radius and off by up to tens of percent "
+            "load's forces on this mesh (while the node sticks, independent of the radius), off by up to tens of percent "
             "(docs/numerics.md §2, 29); mesh the boundary near the grip with edges of at most "
             f"{min(w for *_, w in said) / 4:.2g} m (jsq.shapes: refine_near=[grip points], refine_edge=...; a scene "
             "file: object.refine_edge), or use contact='point' to ask for a point load")

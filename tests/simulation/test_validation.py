@@ -546,7 +546,7 @@ def test_a_squeeze_deeper_than_half_the_object_warns(square, tmp_path):
 
 def test_a_contact_that_stays_one_node_wide_warns(square):
     """Fingertips smaller than the boundary edges at the grip touched one node through the
-    whole squeeze and said nothing: the forces were a point load's, the same for every radius,
+    whole squeeze and said nothing: the forces were a point load's, the same for every radius (the node sticks),
     and 32 % off a converged mesh for a 2 mm tip on 10 mm edges (docs/numerics.md §2, 29). The
     eager squeeze now warns with the contact's Hertz width and the edges that resolve it; a
     corner grip and a contact that grew past one node say nothing."""
