@@ -767,12 +767,12 @@ def resolution_warning(res, points, loops, E: float, thickness: float) -> str | 
     order, ``loops`` the boundary loop sizes (``Mesh.loops``); for a solid mesh.
 
     One node cannot resolve a contact: the squeeze is then a point load's, whose force does
-    not depend on the radius while the node sticks and changes with the mesh (on the foam square by 32 % for a 2 mm
-    tip on 10 mm edges, docs/numerics.md §2, 29). The advice uses the 2D Hertz width of a rigid
-    cylinder on a plane-stress half-plane, 2a with a² = 4 F r / (π E t), F the largest force
-    [N] the finger exerted; it matched the contact width of converged meshes within 10 %. A
-    grip at a corner (the boundary turning by more than 30° at it) is not judged: there the
-    contact is a point."""
+    not depend on the radius while the node sticks and changes with the mesh (on the foam
+    square by 32 % for a 2 mm tip on 10 mm edges, docs/numerics.md §2, 29). The advice uses
+    the 2D Hertz width of a rigid cylinder on a plane-stress half-plane, 2a with
+    a² = 4 F r / (π E t), F the largest force [N] the finger exerted; it matched the contact
+    width of converged meshes within 10 %. A grip at a corner (the boundary turning by more
+    than 30° at it) is not judged: there the contact is a point."""
     k = int(res.count)
     modes, fg = np.asarray(res.modes)[:k], np.asarray(res.finger)[:k]
     forces, nodes, x = np.asarray(res.forces, float)[:k], np.asarray(res.nodes), np.asarray(points, float)
@@ -793,16 +793,17 @@ def resolution_warning(res, points, loops, E: float, thickness: float) -> str | 
         h1, h2 = float(np.hypot(*e1)), float(np.hypot(*e2))
         if np.dot(e1, e2) < math.cos(math.radians(30.0)) * h1 * h2:      # a corner
             continue
-        F = float(np.max(np.hypot(*np.where(own[..., None], forces, 0.0).sum(axis=1).T)))
-        said.append((f, int(nodes[p]), 0.5 * (h1 + h2), F, 4.0 * math.sqrt(F * float(res.radius) / (math.pi * E * thickness))))
+        F = float(np.max(np.hypot(*np.where(own[..., None], forces, 0.0).sum(axis=1).T)))     # [N]
+        width = 4.0 * math.sqrt(F * float(res.radius) / (math.pi * E * thickness))              # 2a [m]
+        said.append((f, int(nodes[p]), 0.5 * (h1 + h2), F, width))
     if not said:
         return None
     where = " and ".join(f"finger {f} (node {n}, edges {h:.2g} m, at most {F:.3g} N: about {w:.2g} m wide)"
                          for f, n, h, F, w in said)
     return (f"the contact stayed one node wide on {where}: the boundary edges there are too long to resolve the "
             f"contact (its width: the 2D Hertz estimate for radius {float(res.radius):g} m), so these are a point "
-            "load's forces on this mesh (while the node sticks, independent of the radius), off by up to tens of percent "
-            "(docs/numerics.md §2, 29); mesh the boundary near the grip with edges of at most "
+            "load's forces on this mesh (while the node sticks, independent of the radius), off by up to tens of "
+            "percent (docs/numerics.md §2, 29); mesh the boundary near the grip with edges of at most "
             f"{min(w for *_, w in said) / 4:.2g} m (jsq.shapes: refine_near=[grip points], refine_edge=...; a scene "
             "file: object.refine_edge), or use contact='point' to ask for a point load")
 
