@@ -587,8 +587,11 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     d*), for at most ``SETTLE_ITERS`` passes (more after a refinement, :func:`check`). A node
     still inside, or a contact still peeling, after them is ``unsettled``: the check resolves
     the set again with a finer ``event_tol`` or stops the squeeze with STALLED. Under Coulomb,
-    once the new contacts hold, the armed sliding contact whose slip rate is most reversed at
-    d* sticks there, a D event (:func:`_reversed`), one per pass.
+    once the new contacts hold, an older stick contact whose force lies outside its cone at d*
+    by more than ``PEEL_SHARE`` of the largest force (the push of a contact that joined
+    ``gap_tol`` inside its tip) slides there, a C event, the farthest out, one per pass; then
+    the armed sliding contact whose slip rate is most reversed at d* sticks there, a D event
+    (:func:`_reversed`), one per pass.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
     most-pulling contact leaves, until the set is consistent or ``SETTLE_ITERS`` passes.
     """
@@ -624,6 +627,8 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     on = (ns.mode > FREE) & ~test
     theta, stuck, out, flip = ns.theta, jnp.zeros_like(on), jnp.zeros_like(on), jnp.zeros_like(on)
     held, slid = _per_finger(model, ns.mode, ns.finger)
+    share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
+    scale = jnp.maximum(largest(sol.F), st.bracket.fmax)
     # a set in which a finger's contacts all slide is the squeeze's end (SLIP_FAILURE, finish):
     # its pulls and sunk nodes are that failure, not a set to settle; let go, they made it a
     # LOST_CONTACT (a sliding point contact of a two-point grasp pulls, docs/numerics.md §2, 24)
@@ -665,14 +670,25 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         flip = (st.added >= 0) & (ns.mode >= SLIP_POS) & (st.checks == st.added + 1) & ~rising & \
             ((fn <= 0) if fn.dtype != jnp.float32 else True)
         mode = jnp.where(flip, SLIP_POS + SLIP_NEG - ns.mode, mode)
-        # D at d*, judged once the new contacts' hypotheses hold; one node per pass, the most
-        # reversed (a stick changes its neighbours' rates again)
+        # C at d* of an older stick contact, once the new contacts' hypotheses hold: an event
+        # keeps every force only to its gap_tol (a contact joins that far inside its tip, and a
+        # sunk one 10 times that far), and a larger gap_tol pushed a neighbour's stick force out
+        # of its cone by a finite jump that ADVANCE, which sees only sign changes within a step,
+        # left for many rows. Beyond PEEL_SHARE of the largest force (round-off below it) the
+        # farthest-out one slides there on the edge it leaves through, one per pass
+        over = on & (ns.mode == STICK) & going & ~jnp.any(pull | out | flip | join) & (sol.fn > 0) & \
+            (laws.cone_margin(model.phi, sol.fn, sol.ft) < -share * scale)          # (a pull: the peel rule)
+        farthest = jnp.argmin(jnp.where(over, laws.cone_margin(model.phi, sol.fn, sol.ft), jnp.inf))
+        slide = over & (jnp.arange(over.shape[0]) == farthest)
+        mode = jnp.where(slide, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
+        out = out | slide
+        # D at d*, judged once the new contacts' hypotheses hold and no stick force lies outside
+        # its cone; one node per pass, the most reversed (a stick changes its neighbours' rates again)
         cand = on & _reversed(model, st, sol, mode) & ~jnp.any(pull | out | flip | join)
         worst = jnp.argmin(jnp.where(cand, sol.rate, jnp.inf))
         stuck = cand & (jnp.arange(cand.shape[0]) == worst)
         mode = jnp.where(stuck, STICK, mode)
         theta = jnp.where(stuck, st.slots.spread()(sol.th, ns.theta), theta)
-    share = PEEL_SHARE[1] if fn.dtype == jnp.float32 else PEEL_SHARE[0]
     # a contact made at this depth pulls at d* when d* lies before its true touch (an event is
     # located to event_tol); while it is being pressed harder (its force's rate positive) and
     # its pull is what that rate makes up within event_tol, it is joining, not peeling: letting
@@ -682,7 +698,6 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     # sliding point contact of a two-point grasp lets the object go) has forces of round-off
     # size, and their signs are no pull (they made a SLIP_FAILURE a LOST_CONTACT by chance)
     joining = (st.added >= 0) & (dsol.fn > 0) & (sol.fn + model.ev_tol * dsol.fn >= 0)
-    scale = jnp.maximum(largest(sol.F), st.bracket.fmax)
     peeling = on & ~joining & ~flip & (sol.fn < -share * scale) & going
     peeled = peeling & (st.checks < budget)
     mode = jnp.where(peeled, FREE, mode).astype(jnp.int32)

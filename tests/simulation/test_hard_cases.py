@@ -25,7 +25,7 @@ from jaxsqueeze.io import cli, scenefile
 from jaxsqueeze.simulation import api as grasp_mod
 from jaxsqueeze.simulation.laws import CONE_SLACK
 import physics
-from physics import check_states, nearest, replay_events, sliding_against_friction, symmetric_square
+from physics import Bounds, check_states, nearest, replay_events, sliding_against_friction, symmetric_square
 
 HERE = os.path.dirname(os.path.abspath(physics.__file__))   # tests/: physics.py for the child
 ROOT = physics.ROOT
@@ -1015,3 +1015,25 @@ def test_a_contact_that_joins_pulling_soon_goes_the_same_way_wherever_the_band_s
         # the two node orders agree to the band's conditioning (adjacent contacts on a stiff
         # thin wall: ~1e-8 of the force)
         np.testing.assert_allclose(a[4], b[4], rtol=0, atol=1e-6 * np.abs(a[4]).max())
+
+
+@pytest.mark.parametrize("gap_tol", [1e-6, 5e-4])
+def test_a_large_gap_tol_leaves_no_stick_force_outside_its_cone(gap_tol):
+    """A contact joins gap_tol inside its tip, so its push moves the other contacts' forces by
+    a finite jump at the event. With gap_tol = 5e-4 m (0.5 % of the object, 1 % allowed) a
+    neighbour's stick force jumped from |ft|/fn = 0.11 to 0.28 (μ = 0.2) and stayed outside the
+    cone for 0.9 mm of squeeze (ADVANCE sees only sign changes within a step); at 1e-6 m a
+    lightly loaded one sat at 0.2046. The check after an event now slides an older stick
+    contact whose force lies outside its cone, a C event at that depth."""
+    mesh = jsq.shapes.rectangle(0.1, 0.1, max_edge=0.01, refine_near=[[-0.005, -0.05], [0.005, 0.05]],
+                                refine_edge=0.002)
+    grip = (jsq.scene.nearest_boundary_node(mesh, (-0.005, -0.05)), jsq.scene.nearest_boundary_node(mesh, (0.005, 0.05)))
+    sc = jsq.Scene(mesh=mesh, material=jsq.Material(E=1e5, nu=0.3, thickness=0.0254), fingers=jsq.Fingers(radius=0.01),
+                   grip=grip, friction=0.2, depth=0.006, settings=jsq.Settings(gap_tol=gap_tol))
+    res = jsq.squeeze(sc)
+    assert res.outcome == jsq.Status.SUCCESS
+    L = 0.1
+    check_states(res, mesh, 0.2, bounds=Bounds(balance=1e-7, circle=1e-10, sink=11 * gap_tol / L, force=1e-6))
+    kinds = np.asarray(res.events.kind)
+    assert np.sum(kinds == 0) >= 4 and np.sum(kinds == 2) >= 2            # contacts joined and some slid
+
