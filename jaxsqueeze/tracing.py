@@ -15,6 +15,13 @@ def is_concrete(x) -> bool:
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(x))
 
 
+def staged() -> bool:
+    """True inside a staging trace (``jax.jit``, ``lax.cond`` branches, ...), where even a
+    computation on concrete values gives a tracer: an eager path that reads the values it
+    computes cannot run there, although every input is concrete."""
+    return isinstance(jax.numpy.zeros(()), jax.core.Tracer)
+
+
 def own_transfers(fun):
     """``fun`` with the host ↔ device transfers it makes allowed under a caller's
     ``jax.transfer_guard``: an eager call takes host numbers (a scene's floats, a mesh's

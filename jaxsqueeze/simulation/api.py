@@ -19,7 +19,8 @@ from ..geometry import boundary
 from .result import EventLog, SqueezeResult, to_result  # noqa: F401
 from .result import trim as trim_result
 from .. import compiler
-from ..tracing import as_array, caller_level, differentiated, forward_levels, is_concrete, own_transfers, reverse_mode
+from ..tracing import (as_array, caller_level, differentiated, forward_levels, is_concrete, own_transfers, reverse_mode,
+                       staged)
 from ..mechanics.operator import Compliance, field_displacement, field_on_host
 from ..geometry.mesh import Mesh
 from ..numbers import flag
@@ -393,7 +394,7 @@ def squeeze(scene: Scene, op: Compliance | None = None, *, throw: bool = False, 
         raise TypeError(REVERSE_MODE)
     if forward_levels((scene, op)) > 1:      # (through a user's jit: _first_order_only, in _run)
         raise TypeError(SECOND_ORDER)
-    concrete = is_concrete(scene)
+    concrete = is_concrete(scene) and not staged()       # (a concrete scene in a user's jit is traced there)
     if throw and not concrete:
         raise ValueError("throw=True raises on the status, which is traced under jax.jit, vmap and jacfwd: "
                          "leave it out there and read result.status (Status.SUCCESS is 0) or result.outcome "
