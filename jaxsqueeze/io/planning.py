@@ -163,7 +163,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
     summary = {
         "quality": name,
         "best": {"s": np.asarray(found.best.s).tolist(), "angle": float(found.best.angle), "quality": found.quality,
-                 "status": res.outcome.name, "grip_force_N": float(res.grip_force),
+                 "status": res.outcome.name, "grip_force_N": float(Q.grip_force(res)),
                  "squeeze_work_J": float(Q.squeeze_work(res))},
         "map": {"spacing_m": float(gmap.s[1] - gmap.s[0]), "positions": len(gmap.s), "squeezes": gmap.evaluations,
                 "feasible_pairs": feasible_pairs(ok),

@@ -43,7 +43,7 @@ from ..compiler import precise
 from ..geometry import boundary
 from ..geometry.mesh import Mesh
 from ..numbers import positive, real_array
-from ..simulation.laws import FREE
+from ..simulation.laws import FREE, SLIP_POS
 from ..simulation.result import SqueezeResult, norm
 from ..tracing import is_concrete, own_transfers
 
@@ -171,6 +171,7 @@ def _slip_margin(res: SqueezeResult, friction, tau, x0=None, loops=None):
     size = norm(jnp.stack([fn, ft], -1))
     phi = jnp.arctan(jnp.asarray(friction, F.dtype))
     reserve = jnp.sin(phi) * fn - jnp.cos(phi) * jnp.abs(ft)    # sin(φ − ψ) |f|, exactly 0 on the edge (no CONE_SLACK)
+    reserve = jnp.where(mode >= SLIP_POS, 0.0, reserve)        # sliding: on the edge (round-off made a failure positive)
     per = []
     for f in (0, 1):
         on = (mode > FREE) & (fg == f) & (size > 0)

@@ -57,13 +57,20 @@ class SceneSlipMargin(NamedTuple):
     programs, so equal scenes share them (a closure made anew for every call compiled every
     map and search again, ~5 s each)."""
 
-    friction: float
+    friction: float | None     # None as the programs' static key: they take the scene's μ
     mesh: object
     contact: str
     friction_model: str
 
     def __call__(self, res):
         return slip_margin(res, self.friction, scene=self)
+
+
+def _keyed(qfn):
+    """``qfn`` as a static argument of the map and search programs: a :class:`SceneSlipMargin`
+    without its μ, which :func:`_summary` takes from the (traced) scene, so that a map at a new
+    μ compiles nothing (a μ sweep of slip-margin maps compiled every map again, ~4 s each)."""
+    return qfn._replace(friction=None) if isinstance(qfn, SceneSlipMargin) else qfn
 
 
 def quality_of(scene: Scene, quality) -> Callable:
@@ -206,10 +213,12 @@ def two_rows(qfn) -> bool:
 
 
 def _summary(scene: Scene, qfn, op, x) -> Summary:
+    if isinstance(qfn, SceneSlipMargin):
+        qfn = qfn._replace(friction=scene.friction)         # the scene's μ, traced (:func:`_keyed`)
     res = squeeze(_placed(scene, x), op=op, trim=False, history=not two_rows(qfn))
     ok = res.status == Status.SUCCESS
     q = jnp.where(ok, _quality(qfn, res), 0.0)
-    return Summary(res.status, q, res.grip_force, res.final_depth, res.margin)
+    return Summary(res.status, q, grip_force(res), res.final_depth, res.margin)   # (the squeeze's, not the push's)
 
 
 @compiler.jit(static_argnums=(1,))
@@ -249,7 +258,7 @@ def compile_search_ahead(scene: Scene, quality, op, vary_angle: bool = False) ->
     a map run meanwhile keeps one core busy, and the search's first step finds the program
     compiled."""
     scale = _scale(scene)
-    _value_and_grad.compile_ahead(quick(scene), quality_of(scene, quality), dataclasses.replace(op, field=None),
+    _value_and_grad.compile_ahead(quick(scene), _keyed(quality_of(scene, quality)), dataclasses.replace(op, field=None),
                                   jnp.asarray(np.zeros(3) * scale), jnp.asarray(scale), bool(vary_angle))
 
 
@@ -390,7 +399,7 @@ def _evaluate(scene: Scene, X, quality, op, batch, chunk, progress, processes, c
     candidates which overflow them will be squeezed again with, whose program a loop starts
     compiling in the background at the first overflow (the rest of the loop runs meanwhile)."""
     op = scene.operator() if op is None else op
-    qfn = quality_of(scene, quality)
+    qfn = _keyed(quality_of(scene, quality))
     if batch == "auto":
         batch = "loop" if compiler.platform() == "cpu" else "vmap"
     if batch not in ("vmap", "loop", "processes"):
@@ -664,7 +673,7 @@ def optimize_placement(scene: Scene, quality="squeeze_work", init=None, optimize
     vary_angle, progress = flag(vary_angle, "vary_angle"), flag(progress, "progress")
     init = None if init is None else candidates(init, "init")
     op = _check(scene, np.zeros((1, 3)) if init is None else init, op, everywhere=True)
-    qfn = quality_of(scene, quality)
+    qfn = _keyed(quality_of(scene, quality))
     P = float(scene.curve().perimeter)
     scale = _scale(scene)
     optimizer = optax.adam(0.02) if optimizer is None else optimizer

@@ -258,6 +258,20 @@ def test_named_qualities_squeeze_with_two_rows_and_functions_with_the_history(el
     assert mapped == pytest.approx(direct, rel=1e-12)
 
 
+def test_a_slip_margin_map_at_a_new_friction_compiles_nothing(ellipse):
+    """The map's programs took the "slip_margin" quality with its μ as a static argument: a μ
+    sweep of slip-margin maps compiled every map again (~4 s each), where a squeeze_work sweep
+    compiled nothing. The programs now take μ from the scene, traced."""
+    P = float(ellipse.curve().perimeter)
+    plan.evaluate(ellipse, [[0.0, P / 2]], "slip_margin", batch="loop", progress=False)
+    other = ellipse.replace(friction=0.6)
+    with compiles() as seen:
+        got = plan.evaluate(other, [[0.0, P / 2]], "slip_margin", batch="loop", progress=False)
+    assert seen == []
+    placed = other.replace(placement=plan.Placement(s=(0.0, P / 2)))
+    assert float(got.quality[0]) == pytest.approx(float(Q.slip_margin(jsq.squeeze(placed), 0.6)), rel=1e-9)
+
+
 def test_placement_at_grip_nodes_reproduces_the_integer_grip(square):
     """Fingers placed by arc length at the grip nodes touch those nodes first, and the squeeze
     is the integer-grip squeeze."""
@@ -630,6 +644,13 @@ def test_slip_margin_shrinks_as_the_grip_slants(square):
     failed = dataclasses.replace(res, forces=forces)
     assert abs(float(Q.slip_margin(failed, mu, tau=1e-12))) < 1e-12
     assert float(Q.slip_margin(failed, mu)) <= 1e-12
+    # a sliding contact is on its cone's edge by the model: a force a round-off inside it read
+    # +1.9e-15 for a SLIP_FAILURE (a failed grasp is never positive); here 1e-9 of φ inside
+    near = (np.cos(phi * (1 - 1e-9)) * axis + np.sin(phi * (1 - 1e-9)) * tangent) * size[:, None]
+    forces[-1][on], modes = near[on], np.array(res.modes)
+    modes[-1][on] = 2
+    assert float(Q.slip_margin(dataclasses.replace(res, forces=forces), mu, tau=1e-12)) > 0       # sticking: inside
+    assert float(Q.slip_margin(dataclasses.replace(res, forces=forces, modes=modes), mu)) <= 0.0
 
 
 def test_slip_margin_is_continuous_where_a_contact_joins(square):
@@ -784,7 +805,7 @@ def test_symmetric_push_is_resisted_equally_by_both_fingers(square, tmp_path):
 
 
 @pytest.mark.filterwarnings("ignore:boundary nodes .* are equally near")     # the grip points sit midway on purpose
-def test_a_push_that_reverses_a_slip_sticks_the_node_where_the_push_starts(square):
+def test_a_push_that_reverses_a_slip_sticks_the_node_where_the_push_starts(square, monkeypatch):
     """Slanted grip, mu = 0.25: two contacts slide at the end of the squeeze. The push (from
     the squeezed state, fingers still) reverses one's slip rate at once, so it sticks at the
     push's first instant (event D where the pusher touches: ADVANCE only sees a rate that
@@ -805,6 +826,13 @@ def test_a_push_that_reverses_a_slip_sticks_the_node_where_the_push_starts(squar
     n = int(plain.count)
     assert np.all(np.asarray(res.push)[:n] == 0) and np.asarray(res.push)[n] > 0
     np.testing.assert_allclose(np.asarray(res.forces)[:n], plain.forces, rtol=0, atol=1e-12 * np.abs(plain.forces).max())
+    # a map's grip force is the squeeze's, at its last row (it read the final row, after the push)
+    from jaxsqueeze.plan import search
+    monkeypatch.setattr(search, "squeeze", lambda *a, **kw: res)
+    monkeypatch.setattr(search, "_placed", lambda scene, x: scene)
+    summ = search._summary(sc, Q.adversary_work, None, None)
+    assert float(summ.grip_force) == pytest.approx(float(plain.grip_force), rel=1e-12)
+    assert abs(float(res.grip_force) - float(plain.grip_force)) > 1e-3 * float(plain.grip_force)
 
 
 def test_a_pusher_that_cannot_touch_from_outside_pushes_nothing(square):
