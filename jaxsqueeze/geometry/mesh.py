@@ -514,7 +514,7 @@ def read_mesh(path) -> Mesh:
 
     import meshio
 
-    path = os.fspath(path)
+    path = os.fsdecode(path)                 # (a bytes path: meshio compares its suffix with str)
     if os.path.isdir(path):
         raise ValueError(f"mesh file {path} is a folder, not a mesh file")
     if not os.path.isfile(path):
@@ -598,7 +598,10 @@ def write_mesh(path, mesh: Mesh, point_data=None, file_format=None) -> None:
 
     import meshio
 
-    name = os.fspath(path)
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"write_mesh(path, mesh) takes a jsq.Mesh, got {type(mesh).__name__} (a scene's is scene.mesh; "
+                        "arrays: jsq.Mesh(points, triangles))")
+    name = path = os.fsdecode(path)                 # (a bytes path: meshio compares its suffix with str)
     if os.path.isdir(name):
         raise ValueError(f"{name} is a folder; write_mesh needs a file name such as {os.path.join(name, 'mesh.vtu')}")
     if file_format is None and not any(name.lower().endswith(e) for e in meshio.extension_to_filetypes):

@@ -140,7 +140,7 @@ def write_paraview(path_dir, res, mesh, op=None, name: str = "squeeze") -> str:
     mesh = views.check_object(res, mesh)
     if op is not None:
         views.check_object(res, op, "operator", takes=("operator",))
-    if isinstance(name, str) and name.endswith(".xdmf"):       # (it wrote x.xdmf.xdmf)
+    if isinstance(name, str) and name.lower().endswith(".xdmf"):       # (it wrote x.xdmf.xdmf, x.XDMF.xdmf)
         name = name[:-len(".xdmf")]
     if not isinstance(name, str) or not name.strip() or os.sep in name or name in (".", ".."):
         raise ValueError(f"name = {name!r}: expected a file name without a folder (e.g. 'squeeze')")

@@ -39,7 +39,8 @@ class EventLog(NamedTuple):
     contact set and the stick/slip modes of every row (where rows share a depth, an event
     located at the depth of the one before, of the last of them). A new contact whose force
     leaves its friction cone as it grows from zero slides from the start: its A is followed
-    by a C at the same depth (a grip node's C is at depth 0).
+    by a C at the same depth (a grip node's C is at depth 0). A squeeze that ended with
+    ``EVENT_OVERFLOW`` had no room for its last events: its last row holds the set they made.
 
     An eager squeeze's log holds its events only. The log of a result from ``jax.jit`` or
     ``squeeze(..., trim=False)`` keeps its fixed capacity (the ``max_events`` it ran with:

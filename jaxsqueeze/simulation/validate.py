@@ -37,6 +37,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from ..numbers import gib, kind
+from .status import Status
 
 FIELDS: tuple[str, ...] = (
     "material.E",
@@ -754,9 +755,11 @@ def inside_tip_warning(res, points, tol: float, contact: str = "segment") -> str
                 "both tips close on it (an object's corner between them), and a node holds one contact, so the rows "
                 "from there on let the other tip pass through it (docs/numerics.md §2, 27); grip farther from the "
                 "corner, with smaller fingertips, or squeeze less deep (result.depth gives the rows before)")
+    stalled = int(np.asarray(res.status)) == int(Status.STALLED)
     why = ("with contact='point' a fingertip touches one node (no event A), and this object meets it along a "
            "segment; use contact='segment' or smaller fingertips" if contact == "point" else
-           "event A should have made it a contact: please report the scene")
+           "the squeeze stopped there, STALLED: the contact set did not settle at that depth (docs/errors.md)"
+           if stalled else "event A should have made it a contact: please report the scene")
     return (f"{where}, free, lies inside fingertip {tip} (by {deepest:.3g} m at most, rows from there on): {why} "
             "(result.depth gives the rows before)")
 

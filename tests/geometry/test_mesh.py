@@ -1,4 +1,5 @@
 """Mesh container, validation, boundary loops, I/O and built-in shapes (Section II)."""
+import os
 import re
 import warnings
 
@@ -438,6 +439,13 @@ def test_write_mesh_refuses_a_folder_or_a_suffix_of_no_format(tmp_path):
         write_mesh(tmp_path / "m.xyz", m)
     write_mesh(tmp_path / "m.xyz", m, file_format="vtu")          # a format given needs no suffix
     assert meshio.read(tmp_path / "m.xyz", file_format="vtu").points.shape == (m.n, 3)
+    # a scene or an array where the mesh belongs said "'Scene' object has no attribute 'points'";
+    # a bytes path failed in meshio's suffix test, and read_mesh called the file unreadable
+    with pytest.raises(TypeError, match=r"write_mesh\(path, mesh\) takes a jsq.Mesh, got ndarray"):
+        write_mesh(tmp_path / "a.vtu", m.points)
+    path = os.fsencode(tmp_path / "b.vtu")
+    write_mesh(path, m)
+    assert read_mesh(path).n == m.n
 
 
 @pytest.mark.parametrize("binary", [False, True])

@@ -373,6 +373,7 @@ def test_post_functions_name_a_wrong_kind_of_argument(offset, tmp_path):
             call()
     path = export.write_paraview(tmp_path, res, scene, name="run.xdmf")
     assert path.endswith(os.sep + "run.xdmf") and os.path.exists(path)
+    assert export.write_paraview(tmp_path, res, scene, name="Big.XDMF").endswith(os.sep + "Big.xdmf")
     with pytest.raises(ValueError, match="expected a file name"):
         export.write_paraview(tmp_path, res, scene, name=" ")
     assert len(plots.plot_force_profile(res, rows=-1).axes[0].lines) >= 1

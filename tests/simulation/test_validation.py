@@ -571,6 +571,23 @@ def test_a_contact_that_stays_one_node_wide_warns(square):
         jsq.squeeze(small.replace(grip=corners))                                   # a corner is a point
 
 
+def test_a_free_node_inside_a_tip_of_a_stalled_squeeze_is_the_stall_not_a_bug():
+    """A squeeze deeper than the object's half stopped STALLED (a node joining and leaving at
+    one depth) and the warning of the free node left inside a tip asked to report the scene as
+    a bug. Now it says that is the stall; a squeeze that did not stop still asks. (A synthetic
+    one-row result: nodes 0 and 1 hold the two tips, node 2 is free 0.5 mm inside tip 0.)"""
+    from types import SimpleNamespace
+    pts = np.array([[0.0, -0.01], [0.0, 0.01], [0.002, -0.011]])
+    res = SimpleNamespace(count=1, modes=np.array([[1, 1, 0]]), finger=np.array([[0, 1, 0]]),
+                          boundary_displacement=np.zeros((1, 3, 2)), radius=0.005, nodes=np.arange(3),
+                          centres=np.array([[[0.0, -0.015], [0.0, 0.015]]]), depth=np.array([0.002]),
+                          status=int(jsq.Status.STALLED))
+    said = V.inside_tip_warning(res, pts, 1e-9)
+    assert said.startswith("from depth = 0.002 m node 2, free, lies inside fingertip 0") and "STALLED" in said
+    assert "please report" not in said
+    assert "please report" in V.inside_tip_warning(SimpleNamespace(**{**vars(res), "status": 0}), pts, 1e-9)
+
+
 def test_squeeze_takes_a_scene_and_an_operator(square):
     with pytest.raises(TypeError, match="squeeze takes a jsq.Scene, got Mesh"):
         jsq.squeeze(square)
