@@ -513,7 +513,8 @@ def values_of(scene, eps: float | None = None) -> dict:
     s = scene.settings
     v = {"material.E": scene.material.E, "material.nu": scene.material.nu,
          "material.thickness": scene.material.thickness, "fingers.radius": scene.fingers.radius,
-         "friction": scene.friction, "depth": scene.depth, "settings.step": s.step,
+         "friction": scene.friction, "depth": scene.depth,
+         "settings.step": s.step if s.step is not None or s.event_tol is None else scene.depth / 50,   # (its default)
          "settings.event_tol": s.event_tol, "settings.newton_tol": s.newton_tol, "settings.gap_tol": s.gap_tol,
          "fingers.rotation": scene.fingers.rotation, "grip": grip, "grip_slots": slots, "n_boundary": m,
          "size": float(np.max(np.ptp(pts_b, axis=0))),
@@ -620,7 +621,8 @@ def shape_problems(scene) -> list[str]:
     s, a = scene.settings, scene.adversary
     fields = {"material.E": scene.material.E, "material.nu": scene.material.nu,
               "material.thickness": scene.material.thickness, "fingers.radius": scene.fingers.radius,
-              "friction": scene.friction, "depth": scene.depth, "settings.step": s.step,
+              "friction": scene.friction, "depth": scene.depth,
+         "settings.step": s.step if s.step is not None or s.event_tol is None else scene.depth / 50,   # (its default)
               "settings.event_tol": s.event_tol, "settings.newton_tol": s.newton_tol, "settings.gap_tol": s.gap_tol}
     if a is not None:
         fields.update({"adversary.s": a.s, "adversary.push": a.push, "adversary.angle": a.angle,
