@@ -132,6 +132,9 @@ def slip_margin(res: SqueezeResult, friction, tau: float = 0.01, scene=None):
         if not np.all(mu >= 0):                      # NaN too; μ = ∞ (full stick) is allowed
             raise ValueError(f"slip_margin's friction must be ≥ 0 (μ = ∞ for full stick); got {mu.tolist()}")
     x0, loops = _surface(scene) or (None, None)
+    if x0 is not None and len(x0) != jnp.shape(res.forces)[-2]:
+        raise ValueError(f"slip_margin's scene has {len(x0)} boundary nodes, the result {jnp.shape(res.forces)[-2]}: "
+                         "pass the scene that was squeezed")
     batch = jnp.shape(res.depth)[:-1]
     dt = jnp.result_type(res.forces)           # (a Python μ and an array μ: one program)
     friction, tau = jnp.asarray(friction, dt), jnp.asarray(tau, dt)

@@ -692,6 +692,11 @@ def test_slip_margin_takes_the_cones_of_the_scene_friction_model(square):
                       (dict(friction=None), "friction .* must be real numbers")]:
         with pytest.raises(ValueError, match=match):
             Q.slip_margin(res, **{"friction": 0.5, **kw})
+    # the point-contact scene of another object failed inside JAX ("add got incompatible shapes")
+    from types import SimpleNamespace
+    other = SimpleNamespace(contact="point", friction_model="coulomb", mesh=jsq.shapes.rectangle(0.1, 0.1, max_edge=0.05))
+    with pytest.raises(ValueError, match=r"slip_margin's scene has \d+ boundary nodes, the result \d+: pass the scene"):
+        Q.slip_margin(res, 0.5, scene=other)
     with pytest.raises(ValueError, match="no adversary phase"):
         Q.failure_push(res)
 
