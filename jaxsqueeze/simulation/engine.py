@@ -676,9 +676,10 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         # of its cone by a finite jump that ADVANCE, which sees only sign changes within a step,
         # left for many rows. Beyond PEEL_SHARE of the largest force (round-off below it) the
         # farthest-out one slides there on the edge it leaves through, one per pass
+        margin = laws.cone_margin(model.phi, sol.fn, sol.ft)
         over = on & (ns.mode == STICK) & going & ~jnp.any(pull | out | flip | join) & (sol.fn > 0) & \
-            (laws.cone_margin(model.phi, sol.fn, sol.ft) < -share * scale)          # (a pull: the peel rule)
-        farthest = jnp.argmin(jnp.where(over, laws.cone_margin(model.phi, sol.fn, sol.ft), jnp.inf))
+            (margin < -share * scale)                                              # (a pull: the peel rule)
+        farthest = jnp.argmin(jnp.where(over, margin, jnp.inf))
         slide = over & (jnp.arange(over.shape[0]) == farthest)
         mode = jnp.where(slide, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
         out = out | slide
