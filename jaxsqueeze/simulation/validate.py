@@ -833,8 +833,11 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
         errors.append(f"depth = {depth:g} m is not smaller than the object ({size:g} m across): the squeeze "
                       f"would crush it; {hint}")
     if size is not None and radius is not None and not 1e-3 <= radius / size <= 10:
+        pad = ("; a fingertip this large is a near-flat pad, which works, but positions are taken about its "
+               "centre, so the forces of the first nanometres of a squeeze carry round-off about radius/size times "
+               "larger (docs/numerics.md §2, 31)") if radius > 10 * size else ""
         warns.append(f"the fingertip radius ({radius:g} m) and the object ({size:g} m across) differ by a factor "
-                     f"{max(radius / size, size / radius):.3g}; {hint}")
+                     f"{max(radius / size, size / radius):.3g}; {hint}{pad}")
     if size is not None and thickness is not None and thickness > 10 * size:
         warns.append(f"thickness = {thickness:g} m is {thickness / size:.3g} times the object's size ({size:g} m "
                      f"across), where plane stress describes a thin plate; {hint}")

@@ -138,7 +138,7 @@ def test_a_flat_pad_takes_its_contacts_one_touch_at_a_time(meshes):
     depth: 4e-5 N at 67 nm)."""
     mesh = meshes["square"]
     grip = (jsq.scene.nearest_boundary_node(mesh, SLANTED[0]), jsq.scene.nearest_boundary_node(mesh, SLANTED[1]))
-    with pytest.warns(UserWarning, match=r"radius \(1000 m\) and the object \(0.1 m across\) differ"):
+    with pytest.warns(UserWarning, match=r"radius \(1000 m\) and the object \(0.1 m across\) differ.* near-flat pad"):
         res = jsq.squeeze(jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=NU, thickness=H),
                                     fingers=jsq.Fingers(radius=1e3), grip=grip, friction=0.2, depth=0.005))
     o = from_mesh(mesh, E, NU, H, 1e3, grip, 0.2, 0.005)

@@ -397,6 +397,8 @@ def test_mixed_units():
     assert not err and any("more than 50% of the object" in w for w in warn)
     # a 10 mm fingertip and a 25.4 mm plate written in mm on a 0.1 m object: were silent
     assert V.unit_problems(size=0.1, radius=10.0)[1][0].startswith("the fingertip radius (10 m) and the object")
+    assert "near-flat pad" in V.unit_problems(size=0.1, radius=10.0)[1][0]          # (docs/numerics.md §2, 31)
+    assert "near-flat pad" not in V.unit_problems(size=100.0, radius=0.01)[1][0]    # a tip in mm: no pad
     assert "plane stress describes a thin plate" in V.unit_problems(size=0.1, thickness=25.4)[1][0]
     assert V.unit_problems(size=0.1, radius=0.5, thickness=0.1) == ([], [])
 
