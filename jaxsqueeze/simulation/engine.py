@@ -78,6 +78,10 @@ SUNK_TOLS = (10, 2)
 #: tolerance), is resolved again with the tolerance divided by REFINE[0], at most REFINE[1]
 #: times in a squeeze (float64, friction), before the squeeze stops STALLED (:func:`check`)
 REFINE = (10.0, 6)
+#: an event is located to event_tol or to this share of its depth, the finer: a flat pad's
+#: first touches and slides come at a few nm, below the default tolerance of a mm squeeze
+#: (step * 1e-4), and located to it they came in the wrong order (docs/numerics.md §2, 31)
+EVENT_REL = 1e-4
 
 
 # ----------------------------------------------------------------------------- loop state
@@ -251,6 +255,7 @@ def step(model: Model, st: State) -> State:
     accept the solve as the next row."""
     dt = model.ev_tol.dtype
     model = dataclasses.replace(model, ev_tol=model.ev_tol / jnp.asarray(REFINE[0], dt) ** st.stats.refined.astype(dt))
+    model = _near(model, st.bracket.hi, (st.phase == LOCATE) | (st.phase == CHECK))   # (st.bracket: this event's)
     with jax.named_scope("target"):      # (the scopes name the parts in profiles: profile_row.py)
         d = target(model, st)
     with jax.named_scope("solve"):
@@ -263,6 +268,13 @@ def step(model: Model, st: State) -> State:
         st = lax.cond(take, lambda: _accept(model, st, sol, dsol, d), lambda: st)
     with jax.named_scope("reconcile"):
         return reconcile(model, st)
+
+
+def _near(model: Model, hi, where=True) -> Model:
+    """The model with ``event_tol`` at most ``EVENT_REL`` of the depth hi of the event being
+    located (not below round-off), where ``where``."""
+    rel = jnp.maximum(EVENT_REL * hi, 1e3 * jnp.finfo(hi.dtype).eps * model.h)
+    return dataclasses.replace(model, ev_tol=jnp.where(where, jnp.minimum(model.ev_tol, rel), model.ev_tol))
 
 
 def reconcile(model: Model, st: State) -> State:
@@ -346,6 +358,7 @@ def bracket(model: Model, st: State, sol: Solution, dsol: Solution, d):
     located = locate_event(model, st, sol, dsol, d)
     st = jax.tree.map(lambda a, c: jnp.where(was == ADVANCE, a, c), stepped, located)
     b = st.bracket
+    model = _near(model, b.hi)               # (a bracket ADVANCE just opened: its tolerance too)
     closed = (st.phase == LOCATE) & ((b.hi - b.lo <= model.ev_tol) | (b.iters >= model.cfg.bisect_iters)
                                      | _converged(model, b))
     return lax.cond(closed, lambda: apply_event(model, st), lambda: st), take & (was == ADVANCE)

@@ -168,9 +168,9 @@ class Settings:
 
     step: squeeze step [m]; default ``depth / 50``.
     event_tol: width [m] to which an event's depth is bracketed before the final
-        implicit-function refinement; default ``step * 1e-4``. Events found in one bracket
-        happen together, but a touch (event A) more than ``gap_tol`` past the first is taken at
-        its own depth.
+        implicit-function refinement, or 1e-4 of the event's depth where that is finer;
+        default ``step * 1e-4``. Events found in one bracket happen together, but a touch
+        (event A) more than ``gap_tol`` past the first is taken at its own depth.
     newton_tol: slip-angle Newton tolerance on the update [rad]; default 1e-11 in float64,
         1e-5 in float32.
     gap_tol: penetration [m] a free node may reach before event A fires; default

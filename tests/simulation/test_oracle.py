@@ -125,29 +125,31 @@ def test_squeeze_matches_the_oracle(meshes, name):
     replay_events(res, frictionless=model == "frictionless")      # the log holds every mode change
 
 
-def test_a_flat_pad_takes_its_contacts_one_touch_at_a_time(meshes):
-    """A fingertip of radius 1,000 m on the slanted grip of the square (mu = 0.2, default
-    settings: event_tol 1e-8 m): its neighbours touch 0.6 to 1.1 nm apart (6e-9 to 1e-8 L),
-    well inside one event bracket. Joined all at the first touch, the later ones pulled there,
-    the stick hypothesis judged all four outside their cones (A A A A C C C C at one depth)
-    and the grip nodes slid out; each joins at its own touch (docs/numerics.md §2, 31), as
-    in the oracle, which bisects each event to 1e-12 L: A A A C A C, then finger 1's last
-    sticking neighbour slides and its grip node after it, SLIP_FAILURE at 67 nm. The depths agree
-    to 1.5e-10 L (the oracle's gap of a 1,000 m tip is rounded to R eps, and the failure is
-    located to event_tol on a sliding set), the forces at that depth to 2e-4 (force grows with
-    depth: 4e-5 N at 67 nm)."""
+@pytest.mark.parametrize("radius, mu, kinds", [(1e3, 0.2, "AAACACCC"), (3e3, 0.15, "ACACACACC")])
+def test_a_flat_pad_takes_its_contacts_one_touch_at_a_time(meshes, radius, mu, kinds):
+    """Fingertips of radius 1,000 and 3,000 m on the slanted grip of the square (default
+    settings: event_tol 1e-8 m): the neighbours touch 0.2 to 1.1 nm apart at depths of 7 to
+    23 nm, inside one event bracket and below its width. Joined all at the first touch, the
+    later ones pulled there, the stick hypothesis judged all four outside their cones (1,000 m:
+    A A A A C C C C at one depth) and the grip nodes slid out; each now joins at its own touch,
+    and every event is located to 1e-4 of its depth where that is finer than event_tol
+    (docs/numerics.md §2, 31; 3,000 m at mu = 0.15 failed at 7.6 nm instead of 13.3 nm). As in
+    the oracle, which bisects each event to 1e-12 L: the same events, then the grip node of
+    finger 1 slides with no sticking neighbour left, SLIP_FAILURE. The depths agree to 1.5e-10 L
+    (the gap of a tip 1e4 L wide is rounded to R eps), the forces at the end to 2e-4 (force
+    grows with depth: 4e-5 N at 67 nm)."""
     mesh = meshes["square"]
     grip = (jsq.scene.nearest_boundary_node(mesh, SLANTED[0]), jsq.scene.nearest_boundary_node(mesh, SLANTED[1]))
-    with pytest.warns(UserWarning, match=r"radius \(1000 m\) and the object \(0.1 m across\) differ.* near-flat pad"):
+    with pytest.warns(UserWarning, match=r"radius \(\d+ m\) and the object \(0.1 m across\) differ.* near-flat pad"):
         res = jsq.squeeze(jsq.Scene(mesh=mesh, material=jsq.Material(E=E, nu=NU, thickness=H),
-                                    fingers=jsq.Fingers(radius=1e3), grip=grip, friction=0.2, depth=0.005))
-    o = from_mesh(mesh, E, NU, H, 1e3, grip, 0.2, 0.005)
+                                    fingers=jsq.Fingers(radius=radius), grip=grip, friction=mu, depth=0.005))
+    o = from_mesh(mesh, E, NU, H, radius, grip, mu, 0.005)
     L = float(np.ptp(mesh.points, axis=0).max())
     assert res.outcome.name == o.status == "SLIP_FAILURE"
     ev_l, ev_o = res.events.rows(), o.events
     assert [(k, n, f) for _, n, k, f in ev_l] == [(e.kind, e.node, e.finger) for e in ev_o]
-    assert "".join(k for _, _, k, _ in ev_l) == "AAACACCC"
-    assert len({d for d, *_ in ev_l[:3]}) == 3                           # three touches, three depths
+    assert "".join(k for _, _, k, _ in ev_l) == kinds
+    assert len({d for d, _, k, _ in ev_l if k == "A"}) == 4                # four touches, four depths
     assert max(abs(a[0] - b.depth) for a, b in zip(ev_l, ev_o)) <= 1e-9 * L
     assert abs(float(res.final_depth) - o.final_depth) <= 1e-9 * L
     mode = np.asarray(res.modes[-1])
