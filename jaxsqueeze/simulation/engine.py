@@ -696,11 +696,15 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
         # keeps every force only to its gap_tol (a contact joins that far inside its tip, and a
         # sunk one 10 times that far), and a larger gap_tol pushed a neighbour's stick force out
         # of its cone by a finite jump that ADVANCE, which sees only sign changes within a step,
-        # left for many rows. Beyond PEEL_SHARE of the largest force (round-off below it) the
-        # farthest-out one slides there on the edge it leaves through, one per pass
+        # left for many rows. Beyond PEEL_SHARE of the largest force (round-off below it), at d*
+        # and still at the probe d* + η (the new contacts' horizon), the farthest-out one slides
+        # there on the edge it leaves through, one per pass. One back inside its cone by the
+        # probe is left stuck: at nm depths (a flat pad) the default gap_tol's push is 1e-3 of
+        # the forces, passes within ~gap_tol of squeeze, and slid a node D had just stuck, then
+        # its neighbours and the grip node: SLIP_FAILURE where the load holds (§2, 31)
         margin = laws.cone_margin(model.phi, sol.fn, sol.ft)
         over = on & (ns.mode == STICK) & going & ~jnp.any(pull | out | flip | join) & (sol.fn > 0) & \
-            (margin < -share * scale)                                              # (a pull: the peel rule)
+            (margin < -share * scale) & (laws.cone_margin(model.phi, fn, ft) < -share * scale)   # (a pull: peel rule)
         farthest = jnp.argmin(jnp.where(over, margin, jnp.inf))
         slide = over & (jnp.arange(over.shape[0]) == farthest)
         mode = jnp.where(slide, jnp.where(sol.ft < 0, SLIP_POS, SLIP_NEG), mode)
