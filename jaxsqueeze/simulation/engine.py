@@ -612,9 +612,10 @@ def _hypothesis(model: Model, st: State, sol: Solution, dsol: Solution):
     d*), for at most ``SETTLE_ITERS`` passes (more after a refinement, :func:`check`). A node
     still inside, or a contact still peeling, after them is ``unsettled``: the check resolves
     the set again with a finer ``event_tol`` or stops the squeeze with STALLED. Under Coulomb,
-    once the new contacts hold, an older stick contact whose force lies outside its cone at d*
-    by more than ``PEEL_SHARE`` of the largest force (the push of a contact that joined
-    ``gap_tol`` inside its tip) slides there, a C event, the farthest out, one per pass; then
+    once the new contacts hold, an older stick contact whose force lies outside its cone at d*,
+    and still at the probe, by more than ``PEEL_SHARE`` of the largest force (the push of a
+    contact that joined ``gap_tol`` inside its tip) slides there, a C event, the farthest out,
+    one per pass; then
     the armed sliding contact whose slip rate is most reversed at d* sticks there, a D event
     (:func:`_reversed`), one per pass.
     Frictionless (every pass): free nodes that would penetrate join where they are, else the
