@@ -123,10 +123,11 @@ def validate_values(grasp: Grasp, scene: Scene, op: Compliance) -> dict:
     if scene.placement is None:
         xp = np if is_concrete((grasp.grip, grasp.radius, op.points)) else jnp    # eager: no tiny device ops
         P, grip = xp.asarray(op.points) * xp.asarray(op.length), xp.asarray(grasp.grip)
-        gp = P[xp.clip(grip, 0, op.m - 1)]
+        slot = xp.clip(grip, 0, op.m - 1)
+        gp = P[slot]
+        dirs = validate.tip_directions(gp, xp.asarray(op.normals)[slot], scene.friction_model == "frictionless", xp=xp)
         values.update({"grip_slots": grip, "n_boundary": op.m, "grip_distance": xp.linalg.norm(gp[1] - gp[0]),
-                       "grip.overlap": validate.fingertip_overlap(P, xp.asarray(op.normals), grip,
-                                                                  xp.asarray(grasp.radius), xp=xp)})
+                       "grip.overlap": validate.fingertip_overlap(P, grip, dirs, xp.asarray(grasp.radius), xp=xp)})
     else:
         values.update({"placement.s": grasp.placement[0], "placement.angle": grasp.placement[1]})
     if scene.adversary is not None:

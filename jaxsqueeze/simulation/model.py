@@ -14,7 +14,7 @@ import jax.numpy as jnp
 from ..geometry import boundary
 from ..mechanics.operator import Compliance
 from . import laws
-from .validate import FIELDS
+from .validate import FIELDS, OVERLAP_TOL, fingertip_overlap, tip_directions
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -197,13 +197,16 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
         grip = jnp.stack([k0, jnp.where(k1 == k0, (k0 + 1) % op.m, k1)])
     else:
         grip = jnp.clip(grasp.grip, 0, op.m - 1)      # an invalid grip is reported, never silently used
-        o = op.points[grip] + r[:2, None] * op.normals[grip]
     p = op.points[grip]
-    if not cfg.placement:
+    if not cfg.placement or cfg.friction_model == "frictionless":
         e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
-    if cfg.friction_model == "frictionless":
-        e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
-        o = p + r[:2, None] * jnp.stack([e, -e])
+        o = p + r[:2, None] * tip_directions(p, op.normals[grip], cfg.friction_model == "frictionless")
+    if cfg.placement:
+        # (an integer grip's overlap is validated before the squeeze: grip.overlap) a fingertip
+        # re-centred on the line through its first contacts (frictionless) may reach past
+        # other nodes at d = 0: no first touch, no grip
+        reach = fingertip_overlap(op.points, grip, (o - p) / r[:2, None], r[0])
+        touches = touches & jnp.all(reach <= OVERLAP_TOL * jnp.minimum(r[0], 1.0))
     # smooth feasibility margin (Section I-A), −π when a placed finger cannot touch the object.
     # The cone is the fingertip's: around its normal at the contact, from the centre to the node
     # (the object's normal there for an integer grip, whose fingertip sits along it; not for a

@@ -68,7 +68,7 @@ round-off of the depth itself."""
 
 OVERLAP_TOL = 1e-3
 """A fingertip placed at a grip node may overlap other boundary nodes by at most this
-fraction of its radius at first touch (d = 0)."""
+fraction of its radius, or of the object's size where that is smaller, at first touch (d = 0)."""
 
 
 # ----------------------------------------------------------------------------- the rules
@@ -306,7 +306,9 @@ def _r_overlap(values, xp):
     ov = xp.max(ov, axis=-1) if ov.ndim >= 1 else ov
     r = _get(values, "fingers.radius")
     r = 0.0 if r is None else xp.asarray(r)
-    tol = OVERLAP_TOL * xp.where(_finite_pos(xp, r), r, 0.0)
+    size = _get(values, "size")
+    r = xp.where(_finite_pos(xp, r), r, 0.0)
+    tol = OVERLAP_TOL * (r if size is None else xp.minimum(r, xp.asarray(size)))
     bad_r = _r_radius(values, xp)                                 # a bad radius is reported as such
     return xp.isfinite(ov) & (ov <= tol) | (False if bad_r is None else ~bad_r)
 
@@ -348,8 +350,10 @@ RULES: tuple[Rule, ...] = (
          f"most {MAX_ROTATION:.4g} rad (ten turns) over the squeeze (sum of |c_k| depth^k)",
          "replace NaN/inf coefficients; rotation is in radians against depth in metres (1 rad per mm is 1e3 rad/m)"),
     Rule("grip.overlap", _r_overlap, f"a fingertip that touches the object only at its grip node at d = 0 "
-         f"(overlap of other boundary nodes at most {OVERLAP_TOL:g} * radius)",
-         "grip away from re-entrant (concave) corners or use a smaller fingertip radius"),
+         f"(overlap of other boundary nodes at most {OVERLAP_TOL:g} * the radius or the object's size, the smaller)",
+         "grip away from re-entrant (concave) corners or use a smaller fingertip radius; a frictionless "
+         "fingertip sits on the line through both grip nodes, so with a broad one pick grip nodes more "
+         "nearly opposite (on a flat face, exactly opposite) or use Coulomb friction with a small mu"),
     Rule("placement", _r_placement, f"finite arc lengths Placement.s [m] within {MAX_WRAP:,.0f} object sizes of "
          f"the boundary's start and a finite Placement.angle within {MAX_WRAP:,.0f} rad (both wrap; farther out "
          "the wrapped value is round-off)",
@@ -419,7 +423,8 @@ def _context(rule: Rule, values) -> str:
         return f" (object size {_show(values['size'])} m)"
     if f == "grip.overlap" and values.get("fingers.radius") is not None:
         return (" (how far [m] fingertip 0 and fingertip 1 reach past another boundary node, > 0 inside "
-                f"the object; fingertip radius {_show(values['fingers.radius'])} m)")
+                f"the object; fingertip radius {_show(values['fingers.radius'])} m"
+                + ("" if values.get("size") is None else f", object size {_show(values['size'])} m") + ")")
     return ""
 
 
@@ -450,28 +455,46 @@ def raise_if_invalid(values: dict) -> None:
 
 
 # ----------------------------------------------------------------------------- from a scene
-def fingertip_overlap(points, normals, slots, radius, xp=None):
+def tip_directions(p, normals, frictionless: bool, xp=None):
+    """(..., 2, 2) unit vectors from the two grip nodes p (..., 2, 2) to their fingertips' centres
+    at first touch: the nodes' outward normals (..., 2, 2), or, frictionless, along the line
+    through the two nodes (the initial forces, radial on the tips, are then along it;
+    ``laws.FRICTIONLESS_TILT`` bounds its tilt from the normals)."""
+    if xp is None:
+        import jax.numpy as xp  # noqa: N812
+    if not frictionless:
+        return xp.asarray(normals)
+    e = p[..., 0, :] - p[..., 1, :]
+    e = e / xp.hypot(e[..., 0], e[..., 1])[..., None]
+    return xp.stack([e, -e], axis=-2)
+
+
+def fingertip_overlap(points, slots, directions, radius, xp=None):
     """Overlap [m] of each fingertip with the other boundary nodes at first touch (d = 0).
 
     Args:
-        points, normals: (m, 2) boundary node positions and outward unit normals.
+        points: (m, 2) boundary node positions [m].
         slots: (2,) int positions of the grip nodes among them.
+        directions: (2, 2) unit vectors from the grip nodes to their fingertips' centres
+            (:func:`tip_directions`).
         radius: fingertip radius [m].
     Returns:
-        (2,) the largest ``radius - distance`` from each fingertip centre (at
-        ``p + radius * n``) to a boundary node other than its grip node; > 0 means the
-        fingertip overlaps the object (a re-entrant corner, a concave part tighter than it).
+        (2,) the largest ``radius - distance`` from each fingertip centre (one radius along its
+        direction) to a boundary node other than its grip node; > 0 means the fingertip
+        overlaps the object (a re-entrant corner, a concave part tighter than it, a broad
+        frictionless fingertip tilted against a flat face). Computed as
+        (2 r n·w − |w|²) / (r + |w − r n|) with w the node's offset from the grip node: no
+        cancellation at a radius far beyond the object (a flat pad's overlap in float32).
     """
     if xp is None:
         import jax.numpy as xp  # noqa: N812
-    P, N = xp.asarray(points), xp.asarray(normals)
+    P, n = xp.asarray(points), xp.asarray(directions)
     s = xp.clip(xp.asarray(slots), 0, P.shape[0] - 1)
-    C = P[s] + radius * N[s]                                     # (2, 2)
-    D = P[None, :, :] - C[:, None, :]
-    d = xp.hypot(D[..., 0], D[..., 1])                           # (2, m), no overflow at a huge radius
+    W = P[None, :, :] - P[s][:, None, :]                         # (2, m, 2) offsets from the grip nodes
+    D = W - radius * n[:, None, :]                               # from the centres
+    reach = (2 * radius * xp.sum(W * n[:, None, :], -1) - xp.sum(W * W, -1)) / (radius + xp.hypot(D[..., 0], D[..., 1]))
     own = xp.arange(P.shape[0])[None, :] == s[:, None]
-    d = xp.where(own, xp.inf, d)
-    return radius - xp.min(d, axis=-1)
+    return xp.max(xp.where(own, -xp.inf, reach), axis=-1)
 
 
 def _boundary_geometry(obj):
@@ -520,7 +543,10 @@ def values_of(scene, eps: float | None = None) -> dict:
          "size": float(np.max(np.ptp(pts_b, axis=0))),
          "grip_distance": xp.sqrt(xp.sum((pa - pb) ** 2, axis=-1))}
     if g.ndim == 1 or xp is not np:
-        v["grip.overlap"] = fingertip_overlap(pts_b, nrm_b, slots, scene.fingers.radius, xp=xp)
+        s_ = xp.clip(slots, 0, m - 1)
+        dirs = tip_directions(xp.asarray(pts_b)[s_], xp.asarray(nrm_b)[s_], scene.friction_model == "frictionless",
+                              xp=xp)
+        v["grip.overlap"] = fingertip_overlap(pts_b, slots, dirs, scene.fingers.radius, xp=xp)
     if not hasattr(scene.mesh, "triangles") or type(scene.mesh).__name__ == "Band":
         v.pop("material.nu")                      # a band has no nu
     if eps is not None:
@@ -858,6 +884,7 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
 
 __all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "RADIUS_SHARE", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
            "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
+           "tip_directions",
            "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
            "shape_problems", "unit_problems", "deep_warning", "PlacementResolutionWarning", "placement_warning",
            "inverted_warning", "boundary_points", "force_limit"]

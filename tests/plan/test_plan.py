@@ -317,6 +317,39 @@ def test_frictionless_fingertips_are_reseated_on_the_line_of_their_contacts(squa
             assert res.outcome == jsq.Status.INFEASIBLE_GRIP and float(res.margin) < 0
 
 
+def test_a_broad_frictionless_fingertip_tilted_against_a_flat_face_is_refused(square):
+    """A frictionless fingertip sits on the line through both grip nodes, tilted from the normals
+    by up to laws.FRICTIONLESS_TILT (2.56°). With the top face's nodes moved 1.5 mm along it the
+    mid-edge nodes' line leans 0.86°, and a 5 m pad on it reaches past the flat face's other
+    nodes (the dip s·α − s²/2r, 0.5 mm 50 mm away). It is refused: the integer grip with
+    grip.overlap (the measure matches r − |x − c| with the centre placed as the squeeze places
+    it), the placement with INFEASIBLE_GRIP. Until 2026-12-08 the overlap was measured from a
+    fingertip along the normals, within 1e-3 · radius (5 mm for this pad): the squeeze joined
+    the face's nodes at d = 0 with forces of 0.4 N and stalled. Along the normals (Coulomb),
+    the same pad touches only its grip nodes."""
+    from jaxsqueeze.simulation import validate as V
+    P = np.array(square.mesh.points, float)
+    top = np.isclose(P[:, 1], 0.05) & (np.abs(P[:, 0]) < 0.049)
+    P[top, 0] += 0.0015                                        # (same node count: the same programs)
+    mesh = jsq.Mesh.from_arrays(P, square.mesh.triangles)
+    g = (nearest(mesh, (0, -0.05)), nearest(mesh, (0.0015, 0.05)))
+    sc = square.replace(mesh=mesh, grip=g, fingers=jsq.Fingers(radius=5.0), friction_model="frictionless")
+    r, X = 5.0, np.asarray(mesh.points)                       # (the mesh's own, centred, frame)
+    e = (X[g[0]] - X[g[1]]) / np.linalg.norm(X[g[0]] - X[g[1]])
+    c, Pb = X[g[0]] + r * e, X[mesh.boundary]                  # fingertip 0's centre, on the grip line
+    direct = r - np.linalg.norm(Pb - c, axis=1)
+    direct[np.flatnonzero(mesh.boundary == g[0])] = -np.inf
+    ov = V.values_of(sc)["grip.overlap"]
+    assert ov[0] == pytest.approx(direct.max(), rel=1e-9) and 4e-4 < ov[0] < 6e-4
+    with pytest.raises(ValueError, match=r"grip.overlap = .*frictionless fingertip sits on the line through both"):
+        V.check_scene(sc)
+    V.check_scene(sc.replace(friction_model="coulomb"))       # along the normals it touches one node
+    assert np.max(V.values_of(sc.replace(friction_model="coulomb"))["grip.overlap"]) < 0
+    res = jsq.squeeze(sc.replace(grip=None, placement=plan.Placement(s=sc.arc_length(np.array(g)))))
+    assert res.outcome == jsq.Status.INFEASIBLE_GRIP and float(res.margin) == -np.pi
+    assert [int(v) for v in res.grip] == list(g) and int(res.count) == 1 and not res.events.rows()
+
+
 def _pushed(ellipse, x):
     """The ellipse placed at x = (s_0, s_1, angle, s_push) and pushed 2 mm by an adversary at
     arc length s_push after its squeeze: one signature, so that the derivative tests share

@@ -334,6 +334,26 @@ def test_fingertip_overlapping_a_reentrant_vertex_is_refused():
     V.check_scene(_scene(mesh, grip=(near(star[0]), near(star[4])), depth=0.005))
 
 
+def test_a_flat_pad_on_a_turned_face_overlaps_nothing_in_float32():
+    """The overlap test of a 3000 m pad (tolerance 1e-3 of a 0.1 m object) is computed without
+    cancellation: r − |x − c| in float32 rounds at ulp(3000) = 2.4e-4 m and refused a face
+    turned by 30° (0.00024 m past its neighbours); the cancellation-free form gives the dip
+    −s²/2r (−4.2e-9 m at 5 mm) to 1e-8 m."""
+    x = np.linspace(-0.05, 0.05, 21)
+    P = np.concatenate([np.c_[x, -0.05 + 0 * x], np.c_[x[::-1], 0.05 + 0 * x]])
+    a = np.deg2rad(30)
+    turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    P, n = (P @ turn.T).astype(np.float32), (np.array([[0.0, -1.0], [0.0, 1.0]]) @ turn.T).astype(np.float32)
+    slots, r = np.array([10, 31]), np.float32(3000.0)
+    ov = np.asarray(V.fingertip_overlap(jnp.asarray(P), slots, jnp.asarray(n), r))
+    assert ov.dtype == np.float32
+    np.testing.assert_allclose(ov, -0.005 ** 2 / (2 * 3000.0), atol=1e-8)
+    C = P[slots] + r * n                                     # the direct form, for the record
+    direct = r - np.hypot(*(P[None] - C[:, None]).transpose(2, 0, 1))
+    direct[[0, 1], slots] = -np.inf
+    assert direct.max() > 1e-4
+
+
 ENV_GUARDS = r"""
 import numpy as np, pytest
 import jaxsqueeze as jsq
