@@ -179,14 +179,16 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
     if cfg.placement:
         s, angle = grasp.placement
         q, n = boundary.point(_scaled_curve(grasp.curve, L), jnp.asarray(s, dt) / L)
-        e0 = (q[0] - q[1]) / jnp.linalg.norm(q[0] - q[1])
+        # (two coincident placements squeeze along nothing: any direction, and no grip below)
+        apart = jnp.linalg.norm(q[0] - q[1])
+        e0 = jnp.where(apart > 0, (q[0] - q[1]) / jnp.where(apart > 0, apart, 1.0), -n[0])
         e = _turn(e0, angle)
         o = q + r[:2, None] * n
         t0, k0 = first_touch(op.points, o[0], -e, r[0])
         t1, k1 = first_touch(op.points, o[1], e, r[1])
         # each tip closes in from where it was placed: a touch more than a radius behind it
         # (t < -r) is the object's far side, reached through the object (|angle| near π)
-        touches = jnp.isfinite(t0) & jnp.isfinite(t1) & (k0 != k1) & (t0 > -r[0]) & (t1 > -r[1])
+        touches = (apart > 0) & jnp.isfinite(t0) & jnp.isfinite(t1) & (k0 != k1) & (t0 > -r[0]) & (t1 > -r[1])
         t0, t1 = jnp.where(touches, t0, 0.0), jnp.where(touches, t1, 0.0)
         o = jnp.stack([o[0] - t0 * e, o[1] + t1 * e])
         # a fingertip narrower than the node spacing can slip between two nodes and first

@@ -423,6 +423,13 @@ def test_derivatives_stay_finite_where_the_grip_never_started(ellipse):
         h = np.eye(4)[k] * 1e-8
         np.testing.assert_allclose(J[-1, k], (float(f(x0 + h)[-1]) - float(f(x0 - h)[-1])) / 2e-8, rtol=1e-6, atol=1e-6)
     assert abs(float(J[-1, 0])) > 100
+    # both fingers placed at one point (a map's diagonal): no squeeze line, still finite (the
+    # squeeze direction once divided by their zero distance: NaN centres and derivatives)
+    x1 = jnp.array([0.03, 0.03, 0.0, 0.05])
+    out, J = f(x1), jax.jacfwd(f)(x1)
+    res = _pushed(ellipse, x1)
+    assert res.outcome == jsq.Status.INFEASIBLE_GRIP and float(out[-1]) == -np.pi
+    assert np.all(np.isfinite(np.asarray(res.centres))) and np.all(np.isfinite(J))
 
 
 def test_cone_angles_of_exactly_opposite_contacts_have_a_finite_derivative():
