@@ -14,7 +14,7 @@ import jax.numpy as jnp
 from ..geometry import boundary
 from ..mechanics.operator import Compliance
 from . import laws
-from .validate import FIELDS, OVERLAP_TOL, fingertip_overlap, tip_directions
+from .validate import FIELDS, fingertip_overlap, tip_directions
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -179,9 +179,10 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
     if cfg.placement:
         s, angle = grasp.placement
         q, n = boundary.point(_scaled_curve(grasp.curve, L), jnp.asarray(s, dt) / L)
-        # (two coincident placements squeeze along nothing: any direction, and no grip below)
+        # (two coincident placements squeeze along no line: finger 0 closes in along its normal
+        # and the pair gets the node it touches and the next, as a placement that touches nothing)
         apart = jnp.linalg.norm(q[0] - q[1])
-        e0 = jnp.where(apart > 0, (q[0] - q[1]) / jnp.where(apart > 0, apart, 1.0), -n[0])
+        e0 = jnp.where(apart > 0, (q[0] - q[1]) / jnp.where(apart > 0, apart, 1.0), n[0])
         e = _turn(e0, angle)
         o = q + r[:2, None] * n
         t0, k0 = first_touch(op.points, o[0], -e, r[0])
@@ -196,19 +197,20 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
         touches = touches & ~jnp.any(boundary.inside(op.points, op.loops, o))
         # a placement that touches nothing still gets two distinct nodes, so that the first
         # solve (reported as INFEASIBLE_GRIP) stays finite
+        k1 = jnp.where(apart > 0, k1, k0)
         grip = jnp.stack([k0, jnp.where(k1 == k0, (k0 + 1) % op.m, k1)])
     else:
         grip = jnp.clip(grasp.grip, 0, op.m - 1)      # an invalid grip is reported, never silently used
     p = op.points[grip]
     if not cfg.placement or cfg.friction_model == "frictionless":
         e = (p[0] - p[1]) / jnp.linalg.norm(p[0] - p[1])
-        o = p + r[:2, None] * tip_directions(p, op.normals[grip], cfg.friction_model == "frictionless")
-    if cfg.placement:
-        # (an integer grip's overlap is validated before the squeeze: grip.overlap) a fingertip
-        # re-centred on the line through its first contacts (frictionless) may reach past
-        # other nodes at d = 0: no first touch, no grip
-        reach = fingertip_overlap(op.points, grip, (o - p) / r[:2, None], r[0])
-        touches = touches & jnp.all(reach <= OVERLAP_TOL * jnp.minimum(r[0], 1.0))
+        toward = tip_directions(p, op.normals[grip], cfg.friction_model == "frictionless")
+        o = p + r[:2, None] * toward
+    if cfg.placement and cfg.friction_model == "frictionless":
+        # re-seated on the line through its first contacts, a placed fingertip may reach more
+        # than gap_tol past other nodes at d = 0 (they would join there with a force): no first
+        # touch, no grip (an integer grip's overlap is validated before the squeeze)
+        touches = touches & jnp.all(fingertip_overlap(op.points, grip, toward, r[0]) <= grasp.gap_tol / L)
     # smooth feasibility margin (Section I-A), −π when a placed finger cannot touch the object.
     # The cone is the fingertip's: around its normal at the contact, from the centre to the node
     # (the object's normal there for an integer grip, whose fingertip sits along it; not for a

@@ -66,9 +66,6 @@ STEP_RESOLUTION = 1e3
 """A step must exceed ``STEP_RESOLUTION * eps * depth``: smaller steps are lost in the
 round-off of the depth itself."""
 
-OVERLAP_TOL = 1e-3
-"""A fingertip placed at a grip node may overlap other boundary nodes by at most this
-fraction of its radius, or of the object's size where that is smaller, at first touch (d = 0)."""
 
 
 # ----------------------------------------------------------------------------- the rules
@@ -161,6 +158,13 @@ def _r_depth(values, xp):
 #: the largest penetration tolerance, as a fraction of the object's size (the default is 1e-9
 #: of it in float64, 1e-5 in float32): beyond it nodes sink visibly into the fingertips unseen
 GAP_SHARE = 1e-2
+
+
+def default_gap_tol(size, eps: float):
+    """The default penetration tolerance [m] (``Settings.gap_tol=None``) of an object ``size`` [m]
+    across, in the precision with machine epsilon ``eps``: 1e-9 of the size in float64, 1e-5 in
+    float32."""
+    return (1e-9 if eps < 1e-10 else 1e-5) * size
 
 
 def _r_gap_tol(values, xp):
@@ -304,13 +308,14 @@ def _r_overlap(values, xp):
         return None
     ov = xp.asarray(ov)
     ov = xp.max(ov, axis=-1) if ov.ndim >= 1 else ov
-    r = _get(values, "fingers.radius")
-    r = 0.0 if r is None else xp.asarray(r)
-    size = _get(values, "size")
-    r = xp.where(_finite_pos(xp, r), r, 0.0)
-    tol = OVERLAP_TOL * (r if size is None else xp.minimum(r, xp.asarray(size)))
-    bad_r = _r_radius(values, xp)                                 # a bad radius is reported as such
-    return xp.isfinite(ov) & (ov <= tol) | (False if bad_r is None else ~bad_r)
+    tol, size = _get(values, "settings.gap_tol"), _get(values, "size")
+    if tol is None:
+        eps = _get(values, "eps")
+        tol = 0.0 if size is None else default_gap_tol(xp.asarray(size), 2.2e-16 if eps is None else eps)
+    tol = xp.asarray(tol)
+    bad_r, bad_gap = _r_radius(values, xp), _r_gap_tol(values, xp)   # each reported as such
+    ok = xp.isfinite(ov) & (ov <= tol)
+    return ok | (False if bad_r is None else ~bad_r) | (False if bad_gap is None else ~bad_gap)
 
 
 class Rule(NamedTuple):
@@ -349,8 +354,9 @@ RULES: tuple[Rule, ...] = (
     Rule("fingers.rotation", _r_rotation, "finite polynomial coefficients [rad / m^k] that turn a fingertip by at "
          f"most {MAX_ROTATION:.4g} rad (ten turns) over the squeeze (sum of |c_k| depth^k)",
          "replace NaN/inf coefficients; rotation is in radians against depth in metres (1 rad per mm is 1e3 rad/m)"),
-    Rule("grip.overlap", _r_overlap, f"a fingertip that touches the object only at its grip node at d = 0 "
-         f"(overlap of other boundary nodes at most {OVERLAP_TOL:g} * the radius or the object's size, the smaller)",
+    Rule("grip.overlap", _r_overlap, "a fingertip that touches the object only at its grip node at d = 0 (no "
+         "other boundary node farther inside it than settings.gap_tol: such a node would join at d = 0 with a "
+         "force before any squeeze)",
          "grip away from re-entrant (concave) corners or use a smaller fingertip radius; a frictionless "
          "fingertip sits on the line through both grip nodes, so with a broad one pick grip nodes more "
          "nearly opposite (on a flat face, exactly opposite) or use Coulomb friction with a small mu"),
@@ -424,7 +430,8 @@ def _context(rule: Rule, values) -> str:
     if f == "grip.overlap" and values.get("fingers.radius") is not None:
         return (" (how far [m] fingertip 0 and fingertip 1 reach past another boundary node, > 0 inside "
                 f"the object; fingertip radius {_show(values['fingers.radius'])} m"
-                + ("" if values.get("size") is None else f", object size {_show(values['size'])} m") + ")")
+                + ("" if values.get("settings.gap_tol") is None else f", gap_tol {_show(values['settings.gap_tol'])} m")
+                + ")")
     return ""
 
 
@@ -882,9 +889,9 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
     return errors, warns
 
 
-__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "RADIUS_SHARE", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
+__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "RADIUS_SHARE", "STEP_RESOLUTION", "GAP_SHARE", "EVENT_SHARE",
            "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
-           "tip_directions",
+           "tip_directions", "default_gap_tol",
            "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
            "shape_problems", "unit_problems", "deep_warning", "PlacementResolutionWarning", "placement_warning",
            "inverted_warning", "boundary_points", "force_limit"]

@@ -325,8 +325,10 @@ def test_a_broad_frictionless_fingertip_tilted_against_a_flat_face_is_refused(sq
     grip.overlap (the measure matches r − |x − c| with the centre placed as the squeeze places
     it), the placement with INFEASIBLE_GRIP. Until 2026-12-08 the overlap was measured from a
     fingertip along the normals, within 1e-3 · radius (5 mm for this pad): the squeeze joined
-    the face's nodes at d = 0 with forces of 0.4 N and stalled. Along the normals (Coulomb),
-    the same pad touches only its grip nodes."""
+    the face's nodes at d = 0 and stalled at its first step. Now a node may lie at most gap_tol
+    inside (deeper, event A would join it at d = 0 with a force): a 0.5 m pad, 5e-5 m past
+    its neighbours (half of 1e-3 · min(radius, size)), is refused too. Along the normals
+    (Coulomb), the same pad touches only its grip nodes."""
     from jaxsqueeze.simulation import validate as V
     P = np.array(square.mesh.points, float)
     top = np.isclose(P[:, 1], 0.05) & (np.abs(P[:, 0]) < 0.049)
@@ -345,6 +347,10 @@ def test_a_broad_frictionless_fingertip_tilted_against_a_flat_face_is_refused(sq
         V.check_scene(sc)
     V.check_scene(sc.replace(friction_model="coulomb"))       # along the normals it touches one node
     assert np.max(V.values_of(sc.replace(friction_model="coulomb"))["grip.overlap"]) < 0
+    half = sc.replace(fingers=jsq.Fingers(radius=0.5))
+    assert np.max(V.values_of(half)["grip.overlap"]) == pytest.approx(5e-5, rel=1e-3)
+    with pytest.raises(ValueError, match=r"grip.overlap = .*gap_tol"):
+        V.check_scene(half)
     res = jsq.squeeze(sc.replace(grip=None, placement=plan.Placement(s=sc.arc_length(np.array(g)))))
     assert res.outcome == jsq.Status.INFEASIBLE_GRIP and float(res.margin) == -np.pi
     assert [int(v) for v in res.grip] == list(g) and int(res.count) == 1 and not res.events.rows()
@@ -625,14 +631,18 @@ def test_a_fingertip_narrower_than_the_mesh_never_squeezes_through_the_object(s,
 
 
 def test_a_placement_without_a_squeeze_line_still_plots(ellipse, tmp_path):
-    """An eager squeeze of both fingers placed at one point has no squeeze line: INFEASIBLE_GRIP
-    with no fingertip positions (NaN centres); the plots still draw the object and say the
-    status instead of failing inside matplotlib or warning."""
+    """An eager squeeze of both fingers placed at one point has no squeeze line: INFEASIBLE_GRIP,
+    its grip the node finger 0 touches along its normal and the next one, and both fingertips
+    where they were placed (finite: until 2026-12-08 they were NaN, and so were the derivatives);
+    the plots still draw the object and say the status instead of failing inside matplotlib or
+    warning."""
     import warnings
 
     missed = ellipse.replace(placement=plan.Placement(s=(0.1, 0.1)))
     res = jsq.squeeze(missed)
-    assert res.outcome == jsq.Status.INFEASIBLE_GRIP and not np.all(np.isfinite(res.centres))
+    assert res.outcome == jsq.Status.INFEASIBLE_GRIP and np.all(np.isfinite(res.centres))
+    s = missed.arc_length(np.asarray(res.grip))               # two neighbours at the placement
+    assert abs(s[0] - 0.1) < 0.006 and 0 < s[1] - s[0] < 0.006
     with warnings.catch_warnings():
         warnings.simplefilter("error")         # nor warn about the all-NaN row
         paths = jsq.plots.save_all(res, missed, str(tmp_path))
