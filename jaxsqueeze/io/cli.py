@@ -200,6 +200,9 @@ def _check_out(out: str) -> None:
     the user's is refused, never emptied). Checked before any work."""
     from .scenefile import SceneFileError
 
+    if os.path.lexists(out) and not os.path.exists(out):      # (``out`` is resolved: what is left is a loop)
+        raise SceneFileError("--out", f"{out} is a symbolic link that leads nowhere (a loop of links); give a "
+                             "folder")
     if os.path.exists(out) and not os.path.isdir(out):
         raise SceneFileError("--out", f"{out} exists and is not a folder")
     if os.path.isdir(out):
@@ -209,12 +212,23 @@ def _check_out(out: str) -> None:
             raise SceneFileError("--out", f"{out} holds files that jaxsqueeze did not write ({shown}); a run "
                                  "replaces its output folder whole, so give a new or empty folder, or an earlier "
                                  "output folder")
+    if os.path.commonpath([out, os.path.realpath(os.getcwd())]) == out:
+        raise SceneFileError("--out", f"{out} is the current folder or holds it; a run replaces its output folder "
+                             "whole, so give a folder below or beside it, e.g. --out results")
     parent = os.path.dirname(out)
     probe = parent
     while probe and not os.path.exists(probe):
         probe = os.path.dirname(probe)
     if probe and not os.path.isdir(probe):
         raise SceneFileError("--out", f"{out} is below {probe}, which is a file, not a folder")
+    try:
+        longest = os.pathconf(probe or ".", "PC_NAME_MAX")
+    except (OSError, ValueError):
+        longest = 255
+    for name in os.path.relpath(out, probe or ".").split(os.sep):
+        if len(os.fsencode(name)) > longest:
+            raise SceneFileError("--out", f"the name {name[:20]}... is {len(os.fsencode(name))} bytes long, and "
+                                 f"this file system takes at most {longest}; give a shorter folder name")
     try:             # a real try: permissions do not tell (root, read-only or virtual file systems)
         os.rmdir(tempfile.mkdtemp(prefix=".jaxsqueeze-probe-", dir=probe or "."))
     except OSError as e:
@@ -226,7 +240,7 @@ def _staging(out: str) -> str:
     with the permissions of a folder made under the user's umask (not mkdtemp's 0700)."""
     parent = os.path.dirname(out)
     os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)}.tmp-", dir=parent)
+    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out)[:64]}.tmp-", dir=parent)   # (a legal name)
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)

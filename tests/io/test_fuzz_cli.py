@@ -252,6 +252,33 @@ def test_out_never_replaces_a_folder_of_the_users(tmp_path, capsys, monkeypatch,
         assert (home / "notes.txt").read_text() == "mine"
 
 
+def test_out_is_never_the_current_folder_a_link_loop_or_an_overlong_name(tmp_path, capsys, monkeypatch):
+    """`--out .` run from inside an earlier output folder, or from an empty folder, replaced the
+    current folder (exit 0, the shell left in a deleted folder); a loop of links and a 250-byte
+    name (its staging folder's name then passes 255 bytes) ran the whole squeeze and ended with
+    exit 3. Each is now exit 2 before any work (the long name is taken), and nothing is touched."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text(BASE, encoding="utf-8")
+    args = ["run", str(scene), "--no-plots", "-q", "--out"]
+    earlier, empty = tmp_path / "earlier", tmp_path / "empty"
+    earlier.mkdir()
+    (earlier / "summary.json").write_text("{}")
+    empty.mkdir()
+    for here, out in ((earlier, "."), (empty, "."), (empty, str(empty))):
+        monkeypatch.chdir(here)
+        assert cli.main(args + [out]) == 2
+        assert "is the current folder or holds it" in capsys.readouterr().err
+        assert os.listdir(earlier) == ["summary.json"] and os.listdir(empty) == []
+    monkeypatch.chdir(tmp_path)
+    os.symlink("loop_b", "loop_a")
+    os.symlink("loop_a", "loop_b")
+    assert cli.main(args + ["loop_a"]) == 2 and "a loop of links" in capsys.readouterr().err
+    assert cli.main(args + ["b" * 256]) == 2 and "256 bytes long" in capsys.readouterr().err
+    from jaxsqueeze.io.cli import _staging
+    tmp = _staging(str(tmp_path / ("a" * 250)))               # a legal name: its staging name is too
+    assert len(os.path.basename(tmp)) < 100 and os.path.isdir(tmp)
+
+
 def test_a_scene_file_reports_its_problems_in_stages():
     """docs/errors.md: every problem of the first stage that has any, one line each: a bad ν and
     a bad radius together; a bad ν hides a bad friction (a later stage) until it is fixed."""
