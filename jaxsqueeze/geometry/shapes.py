@@ -187,6 +187,30 @@ def _segments_touch(p1, p2, q1, q2, eps):
             | (z3 & on(q1, q2, p1)) | (z4 & on(q1, q2, p2)))
 
 
+def _first_crossing(a, b, ring, local, size, eps, slack, block=256):
+    """The first pair (i, j), i < j, of edges a[i]b[i], a[j]b[j] (k, 2) that touch and are not
+    neighbours on one ring, or None. A sweep: edges sorted by their left ends, each block of
+    them against the edges that start before the block's rightmost end, and only pairs whose
+    bounding boxes meet (``slack`` [m] wider) tested exactly: O(k · block) memory and about
+    O(k log k) time on an outline (a (k, k) test of a 20,000 vertex outline took 8 GB)."""
+    lo, hi = np.minimum(a, b) - slack, np.maximum(a, b) + slack
+    order = np.argsort(lo[:, 0], kind="stable")
+    lo, hi = lo[order], hi[order]
+    found = []
+    for start in range(0, len(a), block):
+        r = np.arange(start, min(start + block, len(a)))
+        c = np.arange(start, np.searchsorted(lo[:, 0], hi[r, 0].max(), side="right"))
+        meet = np.all((lo[r, None] <= hi[None, c]) & (lo[None, c] <= hi[r, None]), axis=-1) & (c[None] > r[:, None])
+        R, C = np.nonzero(meet)
+        I, J = np.minimum(order[r[R]], order[c[C]]), np.maximum(order[r[R]], order[c[C]])
+        diff = (local[J] - local[I]) % size[I]
+        near = (ring[I] == ring[J]) & ((diff == 1) | (diff == size[I] - 1))
+        I, J = I[~near], J[~near]
+        hit = _segments_touch(a[I], b[I], a[J], b[J], eps)
+        found += list(zip(I[hit].tolist(), J[hit].tolist()))
+    return min(found) if found else None
+
+
 def _check_rings(outer, holes):
     """Raise if the outline or holes self-intersect, cross each other, or holes lie outside."""
     rings = [outer] + list(holes)
@@ -198,11 +222,7 @@ def _check_rings(outer, holes):
     ring = np.concatenate([np.full(len(r), k) for k, r in enumerate(rings)])
     local = np.concatenate([np.arange(len(r)) for r in rings])
     size = np.array([len(r) for r in rings])[ring]
-    hit = _segments_touch(a[:, None], b[:, None], a[None], b[None], eps)
-    same = ring[:, None] == ring[None]
-    diff = (local[:, None] - local[None]) % size[:, None]
-    adjacent = same & ((diff == 1) | (diff == size[:, None] - 1) | (diff == 0))
-    hit &= ~adjacent
+    first = _first_crossing(a, b, ring, local, size, eps, slack=1e-9 * scale + 1e-12)
     # Adjacent edges only meet badly if they fold back onto each other.
     nxt = np.concatenate([np.roll(r, -2, axis=0) for r in rings])
     e1, e2 = b - a, nxt - b
@@ -210,9 +230,8 @@ def _check_rings(outer, holes):
     for i in np.flatnonzero(fold):
         raise ValueError(f"{names[ring[i]]} folds back on itself at vertex "
                          f"{(local[i] + 1) % size[i]} {b[i].tolist()}; remove that spike")
-    i, j = np.argwhere(np.triu(hit)).T if hit.any() else ([], [])
-    if len(i):
-        i, j = int(i[0]), int(j[0])
+    if first is not None:
+        i, j = first
         raise ValueError(
             f"polygon edges intersect: {names[ring[i]]} edge {local[i]} {a[i].tolist()}->{b[i].tolist()} "
             f"meets {names[ring[j]]} edge {local[j]} {a[j].tolist()}->{b[j].tolist()}; outlines must be "

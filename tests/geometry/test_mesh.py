@@ -667,3 +667,43 @@ def test_equal_holes_are_ordered_by_place_not_by_node_number():
         p = np.random.default_rng(seed).permutation(len(P))
         m = Mesh.from_arrays(P[p], np.argsort(p)[T])
         np.testing.assert_allclose((m.points + m.offset)[m.boundary], start, atol=1e-12)
+
+
+def test_the_edge_crossing_sweep_finds_the_pair_a_full_table_finds():
+    """shapes._first_crossing (a sweep over the edges sorted by x, O(k · block) memory) against
+    the full (k, k) table of shapes._segments_touch it replaced, on 300 random rings of 3–40
+    vertices on a coarse integer grid (many touching and collinear edges), two rings at a time:
+    the same first crossing pair, or none for both. A traced outline of 20,000 vertices took
+    8 GB in the table and takes the sweep 0.2 s."""
+    rng = np.random.default_rng(7)
+
+    def table(a, b, ring, local, size, eps):
+        hit = shapes._segments_touch(a[:, None], b[:, None], a[None], b[None], eps)
+        diff = (local[:, None] - local[None]) % size[:, None]
+        hit &= ~((ring[:, None] == ring[None]) & ((diff == 1) | (diff == size[:, None] - 1) | (diff == 0)))
+        ij = np.argwhere(np.triu(hit))
+        return tuple(int(v) for v in ij[0]) if len(ij) else None
+
+    def star(centre, r0, r1):
+        t = np.sort(rng.uniform(0, 2 * np.pi, int(rng.integers(3, 40))))
+        return np.asarray(centre) + rng.uniform(r0, r1, len(t))[:, None] * np.c_[np.cos(t), np.sin(t)]
+
+    found = 0
+    for k in range(300):
+        if k % 2:        # two rings of grid points: mostly crossing, touching, collinear
+            rings = [rng.integers(0, 6, (int(rng.integers(3, 40)), 2)).astype(float) for _ in range(2)]
+        else:            # a star-shaped outline and a small star near its middle: simple or crossing
+            rings = [star((0, 0), 3, 5), star(rng.uniform(-3, 3, 2), 0.5, 1.5)]
+        a = np.concatenate(rings)
+        b = np.concatenate([np.roll(r, -1, axis=0) for r in rings])
+        ring = np.concatenate([np.full(len(r), k) for k, r in enumerate(rings)])
+        local = np.concatenate([np.arange(len(r)) for r in rings])
+        size = np.array([len(r) for r in rings])[ring]
+        want = table(a, b, ring, local, size, 1e-12 * 25)
+        got = shapes._first_crossing(a, b, ring, local, size, 1e-12 * 25, slack=1e-9 * 5 + 1e-12, block=7)
+        assert got == want
+        found += want is not None
+    assert 150 < found < 280
+    n = 20000
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    shapes._check_rings(np.c_[0.05 * np.cos(t), 0.05 * np.sin(t)], [])      # (a simple ring: no error)
