@@ -517,6 +517,8 @@ def read_mesh(path) -> Mesh:
     path = os.fsdecode(path)                 # (a bytes path: meshio compares its suffix with str)
     if os.path.isdir(path):
         raise ValueError(f"mesh file {path} is a folder, not a mesh file")
+    if os.path.exists(path) and not os.path.isfile(path):
+        raise ValueError(f"mesh file {path} is not a regular file (a device, pipe or socket); give a mesh file")
     if not os.path.isfile(path):
         raise ValueError(f"no such mesh file: {path}")
     if os.path.getsize(path) == 0:

@@ -274,6 +274,7 @@ def _main(args) -> int:
             spec = scenefile.load(path, **sizes)
     else:
         spec = scenefile.load(args.scene, **sizes)
+    _plan_table(spec)
     if not args.quiet:
         for w in spec.warnings:
             print(f"warning: {w}", file=sys.stderr)
@@ -289,6 +290,14 @@ def _main(args) -> int:
     if args.command == "plan":
         return _plan(spec, out, args, progress)
     return _simulate(spec, out, args, progress)
+
+
+def _plan_table(spec):
+    """The scene file's ``[plan]`` table as :class:`~jaxsqueeze.io.planning.PlanSettings`, checked
+    for every command (``run`` does not plan, but a file with a bad table is a bad file)."""
+    from .planning import plan_settings
+
+    return plan_settings(spec.data.get("plan", {}))
 
 
 def _said(spec, caught, quiet: bool) -> list:
@@ -310,9 +319,9 @@ def _plan(spec, out, args, progress) -> int:
     import warnings
 
     from ..post.views import json_ready
-    from .planning import plan_settings, run_plan
+    from .planning import run_plan
 
-    settings = plan_settings(spec.data.get("plan", {}))
+    settings = _plan_table(spec)
     progress.start("plan", "mapping and searching grasps")
     tmp = _staging(out)
     try:

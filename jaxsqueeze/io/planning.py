@@ -93,7 +93,7 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
     from ..post import plots as figures
     from ..post.maps import plot_grasp_map
     from ..post.views import json_ready
-    from ..simulation import api
+    from ..simulation import api, validate
     from ..simulation.scene import Adversary, Placement
 
     P = float(scene.curve().perimeter)
@@ -105,6 +105,11 @@ def run_plan(scene, settings: PlanSettings, out: str, progress: bool = True, plo
                              f"scene's grip, but grip {e} Give grip points on the outer boundary.") from None
     if settings.push > 0:
         s3 = settings.push_at if settings.push_at is not None else float(np.asarray(scene.placement.s)[0]) + P / 4
+        size = float(np.ptp(validate.boundary_points(scene.mesh), axis=0).max())
+        if not abs(s3) <= validate.MAX_WRAP * size:          # (before any compile; it wraps beyond)
+            raise ValueError(f"plan.push_at: expected an arc length [m] within {validate.MAX_WRAP:,.0f} object "
+                             f"sizes ({validate.MAX_WRAP * size:.4g} m) of the boundary's start, got {s3!r}; it "
+                             f"wraps: take it modulo the perimeter, {P:.6g} m")
         try:
             scene = scene.replace(adversary=Adversary(s=s3, push=settings.push, angle=settings.push_angle))
         except ValueError as e:

@@ -363,6 +363,8 @@ def from_dict(data: dict, base: str = ".", path: str = "<dict>", max_edge: float
     title = data.get("title", os.path.splitext(os.path.basename(path))[0])
     if not isinstance(title, str):
         errs.add(SceneFileError("title", f"expected a string, got {_describe(title)}"))
+    elif not title.isprintable():        # (NUL, escape sequences: the report prints the title)
+        errs.add(SceneFileError("title", f"expected printable text, got {title!r} (control characters)"))
     is_band = have("object") and "band" in tables["object"]
     for t, keys in TABLES.items():
         if keys is None or not have(t):

@@ -121,7 +121,9 @@ def test_plan_push_longer_than_the_object_is_an_input_error(tmp_path, capsys):
 @pytest.mark.parametrize("edit, said", [
     ("push = 0.002\npush_angle = 2.0", "error: plan.push_angle: expected an angle from the inward normal below pi/2"),
     ("push = 0.002\noptimizer = \"scale\"", "along the gradient, so the search would walk downhill"),
-    ("push = 0.002\noptimizer = \"freeze\"", "its step from a unit gradient is zero, so the search would never move")])
+    ("push = 0.002\noptimizer = \"freeze\"", "its step from a unit gradient is zero, so the search would never move"),
+    # named "adversary = [1e300, 0]" after 25 s (the map's compile started first)
+    ("push = 0.002\npush_at = 1e300", "error: plan.push_at: expected an arc length [m] within 1,000 object sizes")])
 def test_plan_a_pusher_that_cannot_push_or_an_optimizer_that_descends_names_its_key(tmp_path, capsys, edit, said):
     """push_angle = 2 rad (the pusher moves away from the surface): every cell INFEASIBLE_GRIP
     and "no feasible placement on the coarse map: refine coarse_spacing", a key [plan] does not
