@@ -502,7 +502,12 @@ def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
             check_grip(scene, op)
     grasp = grasp_of(scene, op, validated=True) if concrete else _traced_grasp(scene, op)
     if concrete:
-        validate.raise_if_invalid(validate_values(grasp, scene, op))
+        values = validate_values(grasp, scene, op)
+        validate.raise_if_invalid(values)
+        if "grip.overlap" in values:
+            said = validate.overlap_warning(values["grip.overlap"], float(grasp.gap_tol), float(scene.depth))
+            if said:
+                warnings.warn(said, stacklevel=caller_level())
     return op, grasp
 
 

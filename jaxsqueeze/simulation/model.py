@@ -14,7 +14,7 @@ import jax.numpy as jnp
 from ..geometry import boundary
 from ..mechanics.operator import Compliance
 from . import laws
-from .validate import FIELDS, fingertip_overlap, tip_directions
+from .validate import FIELDS, OVERLAP_TOL, fingertip_overlap, tip_directions
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -207,10 +207,11 @@ def make_model(op: Compliance, grasp: Grasp, cfg: Config) -> Model:
         toward = tip_directions(p, op.normals[grip], cfg.friction_model == "frictionless")
         o = p + r[:2, None] * toward
     if cfg.placement and cfg.friction_model == "frictionless":
-        # re-seated on the line through its first contacts, a placed fingertip may reach more
-        # than gap_tol past other nodes at d = 0 (they would join there with a force): no first
-        # touch, no grip (an integer grip's overlap is validated before the squeeze)
-        touches = touches & jnp.all(fingertip_overlap(op.points, grip, toward, r[0]) <= grasp.gap_tol / L)
+        # re-seated on the line through its first contacts, a placed fingertip may reach past
+        # other nodes at d = 0: beyond grip.overlap's limit no first touch, no grip (an integer
+        # grip's overlap is validated before the squeeze)
+        reach = fingertip_overlap(op.points, grip, toward, r[0])
+        touches = touches & jnp.all(reach <= OVERLAP_TOL * jnp.minimum(r[0], 1.0))
     # smooth feasibility margin (Section I-A), −π when a placed finger cannot touch the object.
     # The cone is the fingertip's: around its normal at the contact, from the centre to the node
     # (the object's normal there for an integer grip, whose fingertip sits along it; not for a

@@ -159,6 +159,12 @@ def _r_depth(values, xp):
 #: of it in float64, 1e-5 in float32): beyond it nodes sink visibly into the fingertips unseen
 GAP_SHARE = 1e-2
 
+OVERLAP_TOL = 1e-3
+"""A fingertip at its grip node may reach at most this fraction of its radius, or of the
+object's size where that is smaller, past another boundary node at first touch (d = 0);
+past ``gap_tol`` such a node joins at d = 0 with a force, and the squeeze warns
+(:func:`overlap_warning`)."""
+
 
 def default_gap_tol(size, eps: float):
     """The default penetration tolerance [m] (``Settings.gap_tol=None``) of an object ``size`` [m]
@@ -308,14 +314,13 @@ def _r_overlap(values, xp):
         return None
     ov = xp.asarray(ov)
     ov = xp.max(ov, axis=-1) if ov.ndim >= 1 else ov
-    tol, size = _get(values, "settings.gap_tol"), _get(values, "size")
-    if tol is None:
-        eps = _get(values, "eps")
-        tol = 0.0 if size is None else default_gap_tol(xp.asarray(size), 2.2e-16 if eps is None else eps)
-    tol = xp.asarray(tol)
-    bad_r, bad_gap = _r_radius(values, xp), _r_gap_tol(values, xp)   # each reported as such
-    ok = xp.isfinite(ov) & (ov <= tol)
-    return ok | (False if bad_r is None else ~bad_r) | (False if bad_gap is None else ~bad_gap)
+    r = _get(values, "fingers.radius")
+    r = 0.0 if r is None else xp.asarray(r)
+    size = _get(values, "size")
+    r = xp.where(_finite_pos(xp, r), r, 0.0)
+    tol = OVERLAP_TOL * (r if size is None else xp.minimum(r, xp.asarray(size)))
+    bad_r = _r_radius(values, xp)                                 # a bad radius is reported as such
+    return xp.isfinite(ov) & (ov <= tol) | (False if bad_r is None else ~bad_r)
 
 
 class Rule(NamedTuple):
@@ -354,9 +359,9 @@ RULES: tuple[Rule, ...] = (
     Rule("fingers.rotation", _r_rotation, "finite polynomial coefficients [rad / m^k] that turn a fingertip by at "
          f"most {MAX_ROTATION:.4g} rad (ten turns) over the squeeze (sum of |c_k| depth^k)",
          "replace NaN/inf coefficients; rotation is in radians against depth in metres (1 rad per mm is 1e3 rad/m)"),
-    Rule("grip.overlap", _r_overlap, "a fingertip that touches the object only at its grip node at d = 0 (no "
-         "other boundary node farther inside it than settings.gap_tol: such a node would join at d = 0 with a "
-         "force before any squeeze)",
+    Rule("grip.overlap", _r_overlap, f"a fingertip that touches the object only at its grip node at d = 0 "
+         f"(no other boundary node more than {OVERLAP_TOL:g} * the radius or the object's size, the smaller, inside "
+         "it)",
          "grip away from re-entrant (concave) corners or use a smaller fingertip radius; a frictionless "
          "fingertip sits on the line through both grip nodes, so with a broad one pick grip nodes more "
          "nearly opposite (on a flat face, exactly opposite) or use Coulomb friction with a small mu"),
@@ -430,8 +435,7 @@ def _context(rule: Rule, values) -> str:
     if f == "grip.overlap" and values.get("fingers.radius") is not None:
         return (" (how far [m] fingertip 0 and fingertip 1 reach past another boundary node, > 0 inside "
                 f"the object; fingertip radius {_show(values['fingers.radius'])} m"
-                + ("" if values.get("settings.gap_tol") is None else f", gap_tol {_show(values['settings.gap_tol'])} m")
-                + ")")
+                + ("" if values.get("size") is None else f", object size {_show(values['size'])} m") + ")")
     return ""
 
 
@@ -502,6 +506,20 @@ def fingertip_overlap(points, slots, directions, radius, xp=None):
     reach = (2 * radius * xp.sum(W * n[:, None, :], -1) - xp.sum(W * W, -1)) / (radius + xp.hypot(D[..., 0], D[..., 1]))
     own = xp.arange(P.shape[0])[None, :] == s[:, None]
     return xp.max(xp.where(own, -xp.inf, reach), axis=-1)
+
+
+def overlap_warning(overlap, gap_tol: float, depth: float) -> str | None:
+    """The warning for fingertips that reach ``overlap`` (2,) [m] past another boundary node at
+    first touch, more than ``gap_tol`` [m] but within ``grip.overlap``'s limit, or None: such a
+    node joins at d = 0 with a force before any squeeze, an error of about overlap / depth."""
+    deepest = float(np.max(overlap))
+    if not deepest > gap_tol:
+        return None
+    return (f"at first touch a fingertip reaches {deepest:.3g} m past another boundary node (gap_tol "
+            f"{gap_tol:.3g} m): that node joins at d = 0 with a force before any squeeze, an error of about "
+            f"{deepest / depth:.2g} of the squeeze's forces ({deepest:.3g} m of {depth:.3g} m depth). A frictionless "
+            "fingertip sits on the line through both grip nodes: grip nodes exactly opposite (a mirror-symmetric "
+            "mesh), or Coulomb friction with a small mu, avoid it (docs/numerics.md §5.1)")
 
 
 def _boundary_geometry(obj):
@@ -889,9 +907,9 @@ def unit_problems(size=None, radius=None, depth=None, E=None, max_edge=None,
     return errors, warns
 
 
-__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "RADIUS_SHARE", "STEP_RESOLUTION", "GAP_SHARE", "EVENT_SHARE",
+__all__ = ["FIELDS", "RULES", "MEMORY_LIMIT", "RADIUS_SHARE", "STEP_RESOLUTION", "OVERLAP_TOL", "GAP_SHARE", "EVENT_SHARE",
            "NEWTON_MAX", "MAX_ROTATION", "DEEP", "invalid_index", "problems", "raise_if_invalid", "fingertip_overlap",
-           "tip_directions", "default_gap_tol",
+           "tip_directions", "default_gap_tol", "overlap_warning",
            "values_of", "check_scene", "history_bytes", "compliance_bytes", "check_costs", "scene_cost_problems",
            "shape_problems", "unit_problems", "deep_warning", "PlacementResolutionWarning", "placement_warning",
            "inverted_warning", "boundary_points", "force_limit"]

@@ -37,8 +37,7 @@ BAD = {
     "settings.gap_tol": POS + [2e-3],            # beyond 1 % of the object (0.1 m) nodes sink in unseen
     "grip_slots": [np.array([3, 3]), np.array([-1, 20]), np.array([3, 40]), np.array([1000000, 2])],
     "fingers.rotation": [np.array([[NAN], [0.0]]), np.array([[0.0], [INF]]), np.array([[0.0], [-63.0]])],
-    "grip.overlap": [np.array([1.4e-3, -1.0]), np.array([NAN, 0.0]),
-                     np.array([-1.0, 1e-9])],                # past gap_tol (1e-10): joins at d = 0
+    "grip.overlap": [np.array([1.4e-3, -1.0]), np.array([NAN, 0.0])],
     "placement.s": [np.array([NAN, 0.2]), np.array([0.0, INF]),
                     np.array([1e15, 0.2]), np.array([0.0, -100.5])],   # beyond 1,000 sizes: wrapping is round-off
     "adversary.push": POS + [0.1, 0.5],           # as long as the object (0.1 m) or longer: it would crush it
