@@ -504,7 +504,7 @@ def _prepare(scene: Scene, op: Compliance | None, concrete: bool):
     if concrete:
         values = validate_values(grasp, scene, op)
         validate.raise_if_invalid(values)
-        if "grip.overlap" in values:
+        if "grip.overlap" in values and scene.contact != "point":       # (point contacts join no node)
             said = validate.overlap_warning(values["grip.overlap"], float(grasp.gap_tol), float(scene.depth))
             if said:
                 warnings.warn(said, stacklevel=caller_level())
